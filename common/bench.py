@@ -1,0 +1,98 @@
+"""Speed benchmarks: each figure is measured in the same run as the reference it is compared to.
+
+``curriculum bench`` prints them; ``curriculum bench --json`` prints one JSON object whose keys
+later milestones extend (planner timings, the 3D tier).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from common.generators import SUITES
+from common.scenario import Scenario
+
+
+def bench_scenario() -> Scenario:
+    """The benchmark world: the first ``warehouse`` suite scenario (31 obstacles, 36-beam 360° 5 m lidar)."""
+    return next(SUITES["warehouse"].scenarios(count=1))
+
+
+def flatland_steps_per_s(scenario: Scenario, steps: int = 20_000, seed: int = 0) -> float:
+    """Steps per second of ``gymnasium.make("flatland/Nav-v0")`` (lidar43) under random actions,
+    resetting whenever an episode ends (random driving crashes often, so resets are part of it)."""
+    import gymnasium as gym
+
+    import flatland  # noqa: F401  (registers the env)
+
+    env = gym.make("flatland/Nav-v0", world=scenario, observation="lidar43")
+    actions = np.random.default_rng(seed).uniform(-1.0, 1.0, (steps, 2)).astype(np.float32)
+    env.reset(seed=seed)
+    for action in actions[:200]:  # warm-up: numba kernels compiled or loaded from cache
+        if any(env.step(action)[2:4]):
+            env.reset()
+    env.reset(seed=seed)
+    start = time.perf_counter()
+    for action in actions:
+        _, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            env.reset()
+    elapsed = time.perf_counter() - start
+    env.close()
+    return steps / elapsed
+
+
+def irsim_steps_per_s(scenario: Scenario, steps: int = 2_000, seed: int = 0) -> float | None:
+    """IR-SIM's steps per second on the same world (headless, same lidar, random actions scaled to
+    the same velocity box, reset on collision or arrival as the env does); None without IR-SIM."""
+    os.environ.setdefault("MPLBACKEND", "Agg")
+    try:
+        # IR-SIM prints its GUI-backend probing to stdout on import; keep stdout for our JSON.
+        with contextlib.redirect_stdout(sys.stderr):
+            import irsim
+    except ImportError:
+        return None
+    from common.irsim_export import scenario_to_irsim
+
+    robot = scenario.robot
+    actions = np.random.default_rng(seed).uniform(-1.0, 1.0, (steps, 2))
+    commands = np.column_stack([0.5 * (actions[:, 0] + 1.0) * robot.v_max, actions[:, 1] * robot.w_max])
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "bench_world.yaml"
+        path.write_text(yaml.safe_dump(scenario_to_irsim(scenario), sort_keys=False))
+        env = irsim.make(str(path), headless=True, log_level="ERROR", seed=seed)
+        for command in commands[:50]:
+            env.step(command.reshape(2, 1))
+        env.reset()
+        start = time.perf_counter()
+        for command in commands:
+            env.step(command.reshape(2, 1))
+            env.get_lidar_scan()
+            if env.robot.collision_flag or env.robot.arrive_flag:
+                env.reset()
+        elapsed = time.perf_counter() - start
+        env.end(0)
+    return steps / elapsed
+
+
+def run_benchmarks(steps: int = 20_000) -> dict[str, Any]:
+    """All figures of this milestone, as one flat mapping."""
+    scenario = bench_scenario()
+    flat = flatland_steps_per_s(scenario, steps)
+    irsim = irsim_steps_per_s(scenario, max(500, steps // 10))
+    return {
+        "world": scenario.name,
+        "obstacles": len(scenario.obstacles),
+        "lidar_beams": scenario.lidar.beams,
+        "flatland_steps_per_s": round(flat, 1),
+        "irsim_steps_per_s": None if irsim is None else round(irsim, 1),
+        "flatland_vs_irsim": None if irsim is None else round(flat / irsim, 1),
+    }

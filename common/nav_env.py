@@ -1,0 +1,117 @@
+"""The navigation env logic both tiers share: scenario per episode, action mapping, observation,
+reward terms, termination. A tier subclasses :class:`NavigationEnv` and supplies its world.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any, Mapping, Protocol, Sequence
+
+import gymnasium as gym
+import numpy as np
+
+from common.actions import ACTION_SPACE, ActionMapping
+from common.kinematics import wrap_angle
+from common.observations import DEFAULT_GOAL_DISTANCE_SCALE, make_layout
+from common.readings import Readings
+from common.rewards import Reward, StepContext
+from common.scenario import Scenario
+from common.sources import ScenarioSource, scenario_source
+
+
+class WorldLike(Protocol):
+    """What the env needs of a tier's world."""
+
+    scenario: Scenario
+
+    def reset(self, seed: int | None = None) -> Readings: ...
+
+    def step(self, v: float, w: float) -> Readings: ...
+
+
+class NavigationEnv(gym.Env):
+    """Reach a goal without touching anything (see a tier's env class for the full description)."""
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+
+    def __init__(
+        self,
+        world: Scenario | str | Path | Sequence[Scenario] | ScenarioSource = "sparse",
+        observation: str = "nav7",
+        reward: str | Mapping[str, Any] = "tutorial2d",
+        render_mode: str | None = None,
+        max_steps: int = 500,
+        difficulty: float = 0.5,
+        goal_distance_scale: float = DEFAULT_GOAL_DISTANCE_SCALE,
+        template: Scenario | None = None,
+    ) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode {render_mode!r}; allowed: None, {', '.join(self.metadata['render_modes'])}")
+        self.render_mode = render_mode
+        self.source = scenario_source(world, difficulty, template)
+        self.observation_name = observation
+        self.goal_distance_scale = goal_distance_scale
+        self.reward = Reward(reward)
+        self.max_steps = int(max_steps)
+        self.action_space = ACTION_SPACE
+        self._load(self.source.draw(np.random.default_rng(0)))
+        self.observation_space = self.layout.space
+        self._readings: Readings | None = None
+        self._steps = 0
+        self._prev_distance = 0.0
+        self.trajectory: list[tuple[float, float]] = []
+
+    def _build_world(self, scenario: Scenario) -> WorldLike:
+        raise NotImplementedError
+
+    def _load(self, scenario: Scenario) -> None:
+        """Build the world, observation layout and action mapping for a scenario."""
+        self.scenario = scenario
+        self.world = self._build_world(scenario)
+        self.layout = make_layout(self.observation_name, scenario.robot, scenario.lidar, self.goal_distance_scale)
+        self.actions = ActionMapping(scenario.robot)
+        self._goal = scenario.goal
+        self._threshold = scenario.goal_threshold
+
+    def _distance_and_bearing(self, readings: Readings) -> tuple[float, float]:
+        x, y, yaw = readings.pose
+        dx, dy = self._goal[0] - x, self._goal[1] - y
+        return math.hypot(dx, dy), wrap_angle(math.atan2(dy, dx) - yaw)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+        super().reset(seed=seed)
+        scenario = self.source.draw(self.np_random)
+        if scenario is not self.scenario:
+            self._load(scenario)
+        self._readings = self.world.reset(seed=int(self.np_random.integers(2**31 - 1)))
+        self.reward.reset()
+        self._steps = 0
+        self._prev_distance, _ = self._distance_and_bearing(self._readings)
+        self.trajectory = [tuple(self._readings.pose[:2])]
+        if self.render_mode == "human":
+            self.render()
+        return self.layout(self._readings, self._goal), {"distance": self._prev_distance, "scenario": scenario.name}
+
+    def step(self, action) -> tuple[np.ndarray, float, bool, bool, dict]:
+        v, w = self.actions.to_velocity(action)
+        readings = self._readings = self.world.step(v, w)
+        self._steps += 1
+        distance, bearing = self._distance_and_bearing(readings)
+        reached = distance < self._threshold
+        ctx = StepContext(distance, self._prev_distance, bearing, v, w, float(readings.lidar.min()), readings.collided, reached)
+        self._prev_distance = distance
+        reward, shares = self.reward(ctx)
+        # A crash is a termination, not a truncation: its value must not bootstrap from the next state.
+        terminated = reached or readings.collided
+        truncated = not terminated and self._steps >= self.max_steps
+        self.trajectory.append((readings.pose[0], readings.pose[1]))
+        info = {"reward_terms": shares, "distance": distance, "is_success": reached, "collided": readings.collided}
+        if self.render_mode == "human":
+            self.render()
+        return self.layout(readings, self._goal), float(reward), terminated, truncated, info
+
+    @property
+    def readings(self) -> Readings | None:
+        """The last readings (None before the first reset)."""
+        return self._readings

@@ -1,0 +1,126 @@
+"""Observation layouts: readings + goal -> a normalised float32 vector, the same in both tiers.
+
+Both layouts read what a real robot has: the wheel-odometry pose and velocity, the lidar and the
+IMU. Every entry is scaled by a property of the robot or sensor (v_max, w_max, range_max) or by a
+fixed distance scale, never by the world's size, so a policy trained in one world reads another.
+
+``nav7`` (the 2D tutorial's layout):
+
+====  ===========================================  ====  ===
+idx   meaning                                       min   max
+====  ===========================================  ====  ===
+0     goal direction x, world frame (dx / d)        -1    1
+1     goal direction y, world frame (dy / d)        -1    1
+2     heading error to the goal / pi                -1    1
+3     linear velocity / v_max                       -1    1
+4     angular velocity / w_max                      -1    1
+5     nearest lidar return / range_max               0    1
+6     goal distance / goal_distance_scale            0    1
+====  ===========================================  ====  ===
+
+``lidar43`` (the 3D tutorial's layout): indices 0-4 as above, then
+
+====  ===========================================  ====  ===
+5     yaw rate (IMU) / w_max                        -1    1
+6-41  36 lidar ranges / range_max, over the scan     0    1
+42    goal distance / goal_distance_scale            0    1
+====  ===========================================  ====  ===
+
+A lidar with other than 36 beams is reduced to 36 sectors of consecutive beams, each reading its
+nearest return. Values are clipped into the bounds (sensor noise may push them out).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+from gymnasium import spaces
+
+from common.errors import ConfigError
+from common.kinematics import wrap_angle
+from common.readings import Readings
+from common.scenario import LidarSpec, RobotProfile
+
+LAYOUTS = ("nav7", "lidar43")
+LIDAR43_BEAMS = 36
+DEFAULT_GOAL_DISTANCE_SCALE = 10.0
+
+
+@dataclass(frozen=True)
+class ObservationLayout:
+    """A named layout: its Box space and the function that fills it."""
+
+    name: str
+    space: spaces.Box
+    compute: Callable[[Readings, tuple[float, float]], np.ndarray]
+
+    def __call__(self, readings: Readings, goal: tuple[float, float]) -> np.ndarray:
+        return self.compute(readings, goal)
+
+
+def _goal_terms(readings: Readings, goal: tuple[float, float], out: np.ndarray, scale: float) -> float:
+    """Write goal direction and heading error into out[0:3]; return the scaled goal distance."""
+    x, y, yaw = readings.odometry.pose
+    dx, dy = goal[0] - x, goal[1] - y
+    distance = math.hypot(dx, dy)
+    inv = 1.0 / max(distance, 1e-6)
+    out[0] = dx * inv
+    out[1] = dy * inv
+    out[2] = wrap_angle(math.atan2(dy, dx) - yaw) / math.pi
+    return distance / scale
+
+
+def _clip(out: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    # The ufuncs directly: np.clip's Python wrapper costs more than the clipping on 7-43 values.
+    np.minimum(out, high, out=out)
+    return np.maximum(out, low, out=out)
+
+
+def sector_minimum(beams: int, sectors: int) -> Callable[[np.ndarray], np.ndarray]:
+    """A function reducing a ``beams``-long scan to ``sectors`` nearest returns (identity when equal)."""
+    if beams == sectors:
+        return lambda ranges: ranges
+    if beams < sectors:
+        index = np.floor(np.arange(sectors) * beams / sectors).astype(np.intp)
+        return lambda ranges: ranges[index]
+    starts = np.floor(np.arange(sectors) * beams / sectors).astype(np.intp)
+    return lambda ranges: np.minimum.reduceat(ranges, starts)
+
+
+def make_layout(
+    name: str, robot: RobotProfile, lidar: LidarSpec, goal_distance_scale: float = DEFAULT_GOAL_DISTANCE_SCALE
+) -> ObservationLayout:
+    """Build the named layout for a robot and its lidar."""
+    inv_v, inv_w, inv_r = 1.0 / robot.v_max, 1.0 / robot.w_max, 1.0 / lidar.range_max
+    if name == "nav7":
+        low = np.array([-1, -1, -1, -1, -1, 0, 0], dtype=np.float32)
+        high = np.ones(7, dtype=np.float32)
+
+        def compute(readings: Readings, goal: tuple[float, float]) -> np.ndarray:
+            out = np.empty(7, dtype=np.float32)
+            out[6] = _goal_terms(readings, goal, out, goal_distance_scale)
+            out[3] = readings.odometry.v * inv_v
+            out[4] = readings.odometry.w * inv_w
+            out[5] = readings.lidar.min() * inv_r
+            return _clip(out, low, high)
+
+    elif name == "lidar43":
+        low = np.concatenate([[-1, -1, -1, -1, -1, -1], np.zeros(LIDAR43_BEAMS + 1)]).astype(np.float32)
+        high = np.ones(43, dtype=np.float32)
+        reduce = sector_minimum(lidar.beams, LIDAR43_BEAMS)
+
+        def compute(readings: Readings, goal: tuple[float, float]) -> np.ndarray:
+            out = np.empty(43, dtype=np.float32)
+            out[42] = _goal_terms(readings, goal, out, goal_distance_scale)
+            out[3] = readings.odometry.v * inv_v
+            out[4] = readings.odometry.w * inv_w
+            out[5] = readings.imu.angular_velocity[2] * inv_w
+            np.multiply(reduce(readings.lidar), inv_r, out=out[6:42])
+            return _clip(out, low, high)
+
+    else:
+        raise ConfigError(None, "observation", f"unknown layout {name!r}; allowed: {', '.join(LAYOUTS)}")
+    return ObservationLayout(name, spaces.Box(low, high, dtype=np.float32), compute)

@@ -1,0 +1,55 @@
+"""What a world reports after each step: the same record for both tiers."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from common.kinematics import Pose2D
+
+
+class Odometry(NamedTuple):
+    """Wheel-odometry estimate: dead-reckoned pose and body velocity (v m/s, w rad/s)."""
+
+    pose: Pose2D
+    v: float
+    w: float
+
+
+class Imu(NamedTuple):
+    """Inertial readings in the body frame: linear acceleration (m/s², x y z) and angular velocity (rad/s, x y z)."""
+
+    linear_acceleration: tuple[float, float, float]
+    angular_velocity: tuple[float, float, float]
+
+
+class Readings(NamedTuple):
+    """One snapshot of a world: later steps never change it (immutable fields, read-only arrays;
+    a NamedTuple because one is built every env step and it is the cheapest immutable record).
+
+    Attributes:
+        pose: the true pose (ground truth, for metrics and rewards; controllers use ``odometry``).
+        velocity: the true body velocity (v, w) during the last step.
+        odometry: the wheel-odometry estimate.
+        lidar: ranges in metres, in the sensor's beam order.
+        imu: inertial readings.
+        collided: whether the robot touched an obstacle or a wall in the last step.
+        time: simulated seconds since reset.
+        camera: RGB, depth and segmentation images where a tier has a camera, else None.
+    """
+
+    pose: Pose2D
+    velocity: tuple[float, float]
+    odometry: Odometry
+    lidar: np.ndarray
+    imu: Imu
+    collided: bool
+    time: float
+    camera: dict[str, np.ndarray] | None = None
+
+
+def frozen(array: np.ndarray) -> np.ndarray:
+    """Mark an array the caller owns as read-only, so a Readings holding it stays a snapshot."""
+    array.flags.writeable = False
+    return array

@@ -1,0 +1,184 @@
+"""Reward terms, weights and presets.
+
+A reward is a mapping of term name -> weight (or ``{weight: w, <param>: value}``); each term is a
+small function of a :class:`StepContext` returning an unweighted value, and :class:`Reward` sums
+``weight * term`` and reports every weighted share, so ``info["reward_terms"]`` shows what the
+agent was paid for. Presets reproduce the two tutorials' final rewards.
+"""
+
+from __future__ import annotations
+
+import collections
+import functools
+import inspect
+import math
+from pathlib import Path
+from typing import Any, Callable, Mapping, NamedTuple
+
+from common.errors import ConfigError
+
+
+class StepContext(NamedTuple):
+    """What a reward term may look at after one step (ground truth, metres and radians)."""
+
+    distance: float  # to the goal, after the step
+    prev_distance: float  # to the goal, before the step
+    heading_error: float  # goal bearing minus yaw, wrapped to [-pi, pi)
+    v: float  # commanded linear velocity, m/s
+    w: float  # commanded angular velocity, rad/s
+    min_range: float  # nearest lidar return, m
+    collided: bool
+    reached: bool
+
+
+def progress(ctx: StepContext, positive_only: bool = False) -> float:
+    """Metres gained toward the goal this step (only gains, if ``positive_only``)."""
+    gained = ctx.prev_distance - ctx.distance
+    return max(0.0, gained) if positive_only else gained
+
+
+def heading_alignment(ctx: StepContext, min_distance: float = 1.0) -> float:
+    """1 - |heading error| (radians) while farther than ``min_distance`` from the goal, else 0."""
+    return 1.0 - abs(ctx.heading_error) if ctx.distance > min_distance else 0.0
+
+
+def goal(ctx: StepContext) -> float:
+    """1 on the step the goal is reached."""
+    return 1.0 if ctx.reached else 0.0
+
+
+def collision(ctx: StepContext) -> float:
+    """1 on the step the robot collides."""
+    return 1.0 if ctx.collided else 0.0
+
+
+def time(ctx: StepContext) -> float:
+    """1 every step (give it a negative weight to make the robot hurry)."""
+    return 1.0
+
+
+def proximity(ctx: StepContext, threshold: float = 0.3) -> float:
+    """How far the nearest lidar return is inside ``threshold`` metres (0 outside it)."""
+    return max(0.0, threshold - ctx.min_range)
+
+
+def proximity_bands(ctx: StepContext, bands: tuple = ((0.3, 5.0), (0.5, 1.0))) -> float:
+    """The value of the first (distance, value) band whose distance exceeds the nearest return."""
+    for distance, value in bands:
+        if ctx.min_range < distance:
+            return float(value)
+    return 0.0
+
+
+def spin(ctx: StepContext, threshold: float = 0.8) -> float:
+    """How much |w| exceeds ``threshold`` rad/s (0 below it)."""
+    return max(0.0, abs(ctx.w) - threshold)
+
+
+class _Stuck:
+    """1 when the last ``window`` steps gained less than ``threshold`` metres in all, farther than
+    ``min_distance`` from the goal. Stateful: it keeps the recent progress."""
+
+    def __init__(self, window: int = 20, threshold: float = 0.05, min_distance: float = 1.0) -> None:
+        self.window, self.threshold, self.min_distance = window, threshold, min_distance
+        self.recent: collections.deque[float] = collections.deque(maxlen=window)
+
+    def reset(self) -> None:
+        self.recent.clear()
+
+    def __call__(self, ctx: StepContext) -> float:
+        self.recent.append(ctx.prev_distance - ctx.distance)
+        full = len(self.recent) == self.window
+        return 1.0 if full and abs(sum(self.recent)) < self.threshold and ctx.distance > self.min_distance else 0.0
+
+
+TERMS: dict[str, Callable[..., Any]] = {
+    "progress": progress,
+    "heading_alignment": heading_alignment,
+    "goal": goal,
+    "collision": collision,
+    "time": time,
+    "stuck": _Stuck,
+    "proximity": proximity,
+    "proximity_bands": proximity_bands,
+    "spin": spin,
+}
+STATEFUL = {"stuck"}
+
+PRESETS: dict[str, dict[str, Any]] = {
+    # 2D tutorial, reward v2: progress-based, spin and proximity penalties, goal bonus.
+    "tutorial2d": {
+        "progress": {"weight": 10.0, "positive_only": True},
+        "spin": {"weight": -5.0, "threshold": 0.8},
+        "proximity_bands": {"weight": -1.0, "bands": [[0.3, 5.0], [0.5, 1.0]]},
+        "goal": 100.0,
+    },
+    # 3D tutorial's final reward.
+    "tutorial3d": {
+        "progress": 1.0,
+        "heading_alignment": {"weight": 0.1, "min_distance": 1.0},
+        "goal": 50.0,
+        "collision": -10.0,
+        "time": -0.01,
+        "stuck": {"weight": -0.1, "window": 20, "threshold": 0.05, "min_distance": 1.0},
+        "proximity": {"weight": -1.0, "threshold": 0.3},
+        "spin": {"weight": -0.2, "threshold": 2.0},
+    },
+}
+
+
+class Reward:
+    """A weighted sum of terms. Call :meth:`reset` at each episode start.
+
+    Args:
+        spec: a preset name or a mapping of term -> weight | {weight, **params}.
+        source: the file the spec came from, for error messages.
+    """
+
+    def __init__(self, spec: str | Mapping[str, Any], source: str | Path | None = None) -> None:
+        self.spec = resolve_reward_spec(spec, source)
+        self._terms: list[tuple[str, float, Callable[[StepContext], float]]] = []
+        self._stateful = []
+        for name, entry in self.spec.items():
+            weight, params = float(entry["weight"]), {k: v for k, v in entry.items() if k != "weight"}
+            if name in STATEFUL:
+                fn = TERMS[name](**params)
+                self._stateful.append(fn)
+            else:
+                fn = functools.partial(TERMS[name], **params) if params else TERMS[name]
+            self._terms.append((name, weight, fn))
+
+    def reset(self) -> None:
+        """Forget per-episode state (e.g. the stuck detector's history)."""
+        for term in self._stateful:
+            term.reset()
+
+    def __call__(self, ctx: StepContext) -> tuple[float, dict[str, float]]:
+        """The total reward and each term's weighted share."""
+        shares = {name: weight * fn(ctx) for name, weight, fn in self._terms}
+        return sum(shares.values()), shares
+
+
+def resolve_reward_spec(spec: str | Mapping[str, Any], source: str | Path | None = None) -> dict[str, dict[str, Any]]:
+    """Validate a reward spec and return it as term -> {weight, **params}."""
+    if isinstance(spec, str):
+        if spec not in PRESETS:
+            raise ConfigError(source, "reward", f"unknown preset {spec!r}; allowed: {', '.join(PRESETS)} or a mapping of term -> weight")
+        spec = PRESETS[spec]
+    if not isinstance(spec, Mapping) or not spec:
+        raise ConfigError(source, "reward", "expected a preset name or a non-empty mapping of term -> weight")
+    resolved: dict[str, dict[str, Any]] = {}
+    for name, entry in spec.items():
+        field = f"reward.{name}"
+        if name not in TERMS:
+            raise ConfigError(source, field, f"unknown reward term; allowed: {', '.join(TERMS)}")
+        entry = {"weight": entry} if not isinstance(entry, Mapping) else dict(entry)
+        weight = entry.get("weight")
+        if isinstance(weight, bool) or not isinstance(weight, (int, float)) or not math.isfinite(weight):
+            raise ConfigError(source, f"{field}.weight", f"expected a finite number, got {weight!r}")
+        allowed = [p for p in inspect.signature(TERMS[name]).parameters if p != "ctx"]
+        for param in entry:
+            if param != "weight" and param not in allowed:
+                raise ConfigError(source, f"{field}.{param}", f"unknown parameter; allowed: weight, {', '.join(allowed)}" if allowed else "unknown parameter; allowed: weight")
+        resolved[name] = entry
+    return resolved

@@ -1,0 +1,301 @@
+"""Scenarios: the robot profile, sensors, world, start, goal and obstacles, defined once for both tiers.
+
+A :class:`Scenario` is an immutable, validated pydantic model, so the same class is the runtime
+object, the YAML schema and the source of one-line error messages. Lengths in metres, angles in
+radians, world frame x right, y up, yaw counter-clockwise.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated, Literal, Union
+
+import numpy as np
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, ValidationError, model_validator
+
+from common import geometry
+from common.errors import ConfigError
+from common.kinematics import Pose2D
+
+Point = tuple[float, float]
+NonNegativeFloat = Annotated[float, Field(ge=0.0)]
+
+
+class _Frozen(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+class CircleObstacle(_Frozen):
+    """A cylinder in 3D: centre (x, y), radius."""
+
+    type: Literal["circle"] = "circle"
+    x: float
+    y: float
+    radius: PositiveFloat
+    height: PositiveFloat = 0.5
+    unobstructed: bool = False  # IR-SIM: drawn, but neither seen by lidar nor collided with
+
+    def sdf(self, points: np.ndarray) -> np.ndarray:
+        """Signed distance from points (N, 2) to this obstacle."""
+        return geometry.circle_sdf(points, self.x, self.y, self.radius)
+
+
+class BoxObstacle(_Frozen):
+    """A box: centre (x, y), ``length`` along its local x, ``width`` along local y, rotated by ``yaw``."""
+
+    type: Literal["box"] = "box"
+    x: float
+    y: float
+    length: PositiveFloat
+    width: PositiveFloat
+    yaw: float = 0.0
+    height: PositiveFloat = 0.5
+    unobstructed: bool = False
+
+    def sdf(self, points: np.ndarray) -> np.ndarray:
+        """Signed distance from points (N, 2) to this obstacle."""
+        return geometry.box_sdf(points, self.x, self.y, self.length, self.width, self.yaw)
+
+    def corners(self) -> np.ndarray:
+        """The four corners (4, 2), counter-clockwise."""
+        c, s = math.cos(self.yaw), math.sin(self.yaw)
+        hl, hw = 0.5 * self.length, 0.5 * self.width
+        local = np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]])
+        return local @ np.array([[c, s], [-s, c]]) + np.array([self.x, self.y])
+
+
+class PolygonObstacle(_Frozen):
+    """A simple polygon given by its vertices in world coordinates."""
+
+    type: Literal["polygon"] = "polygon"
+    vertices: Annotated[list[Point], Field(min_length=3)]
+    height: PositiveFloat = 0.5
+    unobstructed: bool = False
+
+    def sdf(self, points: np.ndarray) -> np.ndarray:
+        """Signed distance from points (N, 2) to this obstacle."""
+        return geometry.polygon_sdf(points, np.asarray(self.vertices, dtype=float))
+
+
+class SegmentObstacle(_Frozen):
+    """A polyline of zero thickness (a wall or an IR-SIM ``linestring``)."""
+
+    type: Literal["segment"] = "segment"
+    points: Annotated[list[Point], Field(min_length=2)]
+    height: PositiveFloat = 0.5
+    unobstructed: bool = False
+
+    def sdf(self, points: np.ndarray) -> np.ndarray:
+        """Distance from points (N, 2) to the polyline (never negative: it has no inside)."""
+        p = np.asarray(self.points, dtype=float)
+        return geometry.segments_distance(points, p[:-1], p[1:])
+
+
+Obstacle = Annotated[
+    Union[CircleObstacle, BoxObstacle, PolygonObstacle, SegmentObstacle], Field(discriminator="type")
+]
+
+
+class RobotProfile(_Frozen):
+    """The robot's footprint, wheels and velocity limits.
+
+    The policy's actions map to v in [0, v_max] and w in [-w_max, w_max]; ``v_min`` (negative to allow
+    reversing), ``w_min`` and the acceleration limits (m/s², rad/s²) only constrain raw
+    ``World.step`` commands, as IR-SIM's ``vel_min`` and ``acce`` do.
+    """
+
+    shape: Literal["circle", "box"] = "circle"
+    radius: PositiveFloat = 0.2
+    length: PositiveFloat = 0.3
+    width: PositiveFloat = 0.2
+    wheel_radius: PositiveFloat = 0.05
+    wheel_base: PositiveFloat = 0.22
+    v_min: float = 0.0
+    v_max: PositiveFloat = 1.0
+    w_max: PositiveFloat = 1.0
+    w_min: float | None = None  # default -w_max
+    accel_v: PositiveFloat = math.inf
+    accel_w: PositiveFloat = math.inf
+    encoder_noise: NonNegativeFloat = 0.0
+
+    @model_validator(mode="after")
+    def _limits_ordered(self) -> "RobotProfile":
+        if self.v_min > self.v_max:
+            raise ValueError(f"v_min {self.v_min} must not exceed v_max {self.v_max}")
+        if self.w_min is not None and self.w_min > self.w_max:
+            raise ValueError(f"w_min {self.w_min} must not exceed w_max {self.w_max}")
+        return self
+
+    @property
+    def w_low(self) -> float:
+        """The lowest angular velocity a raw command may reach."""
+        return -self.w_max if self.w_min is None else self.w_min
+
+    @property
+    def bounding_radius(self) -> float:
+        """Radius of the smallest circle around the footprint (the conservative clearance)."""
+        return self.radius if self.shape == "circle" else 0.5 * math.hypot(self.length, self.width)
+
+
+class LidarSpec(_Frozen):
+    """A 2D lidar: beams spread over ``angle_range`` centred on the sensor's heading.
+
+    ``offset`` is the mount (x, y, yaw) in the robot frame. Ranges are clipped to
+    [range_min, range_max]; a beam that hits nothing reads ``range_max``.
+    """
+
+    beams: Annotated[int, Field(ge=1, le=4096)] = 36
+    range_min: NonNegativeFloat = 0.0
+    range_max: PositiveFloat = 5.0
+    angle_range: Annotated[float, Field(gt=0.0, le=2.0 * math.pi + 1e-9)] = 2.0 * math.pi
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    noise_std: NonNegativeFloat = 0.0
+
+    @model_validator(mode="after")
+    def _range_ordered(self) -> "LidarSpec":
+        if self.range_min >= self.range_max:
+            raise ValueError(f"range_min {self.range_min} must be below range_max {self.range_max}")
+        return self
+
+    def beam_angles(self) -> np.ndarray:
+        """Beam directions relative to the sensor heading, in scan order (IR-SIM's convention)."""
+        return np.linspace(-0.5 * self.angle_range, 0.5 * self.angle_range, self.beams)
+
+
+class WorldSpec(_Frozen):
+    """The world rectangle [x0, x0 + width] × [y0, y0 + height], its step time and boundary walls.
+
+    ``integrator`` is how a step moves the robot: ``euler`` (heading from the step's start, IR-SIM's
+    update) or ``exact`` (the arc of constant v and w).
+    """
+
+    width: PositiveFloat = 10.0
+    height: PositiveFloat = 10.0
+    offset: Point = (0.0, 0.0)
+    step_time: PositiveFloat = 0.1
+    walls: bool = True
+    integrator: Literal["euler", "exact"] = "euler"
+
+    def contains(self, x: float, y: float, margin: float = 0.0) -> bool:
+        """Whether (x, y) lies inside the rectangle, at least ``margin`` from its edges."""
+        x0, y0 = self.offset
+        return x0 + margin <= x <= x0 + self.width - margin and y0 + margin <= y <= y0 + self.height - margin
+
+    @property
+    def diagonal(self) -> float:
+        """Length of the world's diagonal: the largest possible goal distance."""
+        return math.hypot(self.width, self.height)
+
+
+class Scenario(_Frozen):
+    """Everything a tier needs to build a world: robot, sensors, world, start, goal, obstacles."""
+
+    name: str = "scenario"
+    world: WorldSpec = WorldSpec()
+    robot: RobotProfile = RobotProfile()
+    lidar: LidarSpec = LidarSpec()
+    start: tuple[float, float, float] = (1.0, 1.0, 0.0)
+    goal: Point = (9.0, 9.0)
+    goal_threshold: PositiveFloat = 0.3
+    obstacles: list[Obstacle] = []
+    kind: str = "custom"
+    difficulty: Annotated[float, Field(ge=0.0, le=1.0)] = 0.0
+    seed: int | None = None
+
+    @property
+    def start_pose(self) -> Pose2D:
+        """The start as a :class:`Pose2D`."""
+        return Pose2D(*self.start)
+
+    def signed_distance(self, points: np.ndarray, include_unobstructed: bool = False) -> np.ndarray:
+        """Signed distance from points (N, 2) to the nearest obstacle (+inf with none)."""
+        points = np.atleast_2d(np.asarray(points, dtype=float))
+        out = np.full(len(points), np.inf)
+        for obstacle in self.obstacles:
+            if include_unobstructed or not obstacle.unobstructed:
+                out = np.minimum(out, obstacle.sdf(points))
+        return out
+
+    def check(self, source: str | Path | None = None) -> "Scenario":
+        """Raise :class:`ConfigError` if the start or goal is outside the world or inside an obstacle."""
+        clearance = self.robot.bounding_radius
+        for field, (x, y) in (("start", self.start[:2]), ("goal", self.goal)):
+            if not self.world.contains(x, y):
+                raise ConfigError(source, field, f"({x:g}, {y:g}) lies outside the world {self._extent()}")
+            d = float(self.signed_distance(np.array([[x, y]]))[0])
+            if d < (clearance if field == "start" else 0.0):
+                where = "inside an obstacle" if d < 0 else f"{d:.2f} m from an obstacle"
+                need = f"at least {clearance:g} m (the robot's radius)" if field == "start" else "outside"
+                raise ConfigError(source, field, f"({x:g}, {y:g}) is {where}; allowed: {need}")
+        return self
+
+    def _extent(self) -> str:
+        x0, y0 = self.world.offset
+        return f"[{x0:g}, {x0 + self.world.width:g}] x [{y0:g}, {y0 + self.world.height:g}]"
+
+    def to_yaml(self) -> str:
+        """YAML text that :func:`scenario_from_yaml` reads back to an equal scenario."""
+        return yaml.safe_dump(self.model_dump(mode="json"), sort_keys=False)
+
+
+def pydantic_error(source: str | Path | None, error: ValidationError) -> ConfigError:
+    """The first problem of a pydantic error as a one-line :class:`ConfigError`."""
+    first = error.errors()[0]
+    field = ".".join(str(part) for part in first["loc"]) or None
+    message = first["msg"]
+    if first["type"] == "extra_forbidden":
+        message = "unknown key"
+    elif "input" in first and not isinstance(first["input"], (dict, list)):
+        message = f"{message} (got {first['input']!r})"
+    return ConfigError(source, field, message)
+
+
+def read_yaml_mapping(path: str | Path) -> dict:
+    """Parse a YAML file that must hold a mapping; every failure is a one-line :class:`ConfigError`."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise ConfigError(path, None, "no such file") from None
+    except (IsADirectoryError, UnicodeDecodeError, PermissionError) as exc:
+        raise ConfigError(path, None, f"cannot be read as text ({type(exc).__name__})") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}" if mark is not None else None
+        raise ConfigError(path, where, "not valid YAML") from None
+    if data is None:
+        raise ConfigError(path, None, "the file is empty; expected a YAML mapping")
+    if not isinstance(data, dict):
+        raise ConfigError(path, None, f"expected a YAML mapping at the top level, got {type(data).__name__}")
+    return data
+
+
+def scenario_from_mapping(data: dict, source: str | Path | None = None) -> Scenario:
+    """Validate a mapping as a scenario (schema and geometry)."""
+    try:
+        scenario = Scenario.model_validate(data)
+    except ValidationError as exc:
+        raise pydantic_error(source, exc) from None
+    return scenario.check(source)
+
+
+def scenario_from_yaml(text: str, source: str | Path | None = None) -> Scenario:
+    """Parse scenario YAML text."""
+    data = yaml.safe_load(text)
+    if not isinstance(data, dict):
+        raise ConfigError(source, None, "expected a YAML mapping at the top level")
+    return scenario_from_mapping(data, source)
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a project scenario YAML file."""
+    return scenario_from_mapping(read_yaml_mapping(path), path)
+
+
+def save_scenario(scenario: Scenario, path: str | Path) -> None:
+    """Write a scenario as YAML."""
+    Path(path).write_text(scenario.to_yaml())

@@ -1,0 +1,89 @@
+"""Where an env's scenarios come from: one fixed scenario, a generator kind, or a world file.
+
+An env calls ``source.draw(rng)`` at every reset with its own seeded generator, so a seed fixes
+the whole sequence of episodes whatever the source.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Protocol, Sequence
+
+import numpy as np
+
+from common.errors import ConfigError
+from common.generators import KINDS, generate
+from common.scenario import Scenario
+
+
+class ScenarioSource(Protocol):
+    """Anything that yields a scenario per episode."""
+
+    def draw(self, rng: np.random.Generator) -> Scenario: ...
+
+
+class FixedSource:
+    """Always the same scenario."""
+
+    def __init__(self, scenario: Scenario) -> None:
+        self.scenario = scenario
+
+    def draw(self, rng: np.random.Generator) -> Scenario:
+        return self.scenario
+
+
+class ListSource:
+    """A scenario picked at random from a list each episode."""
+
+    def __init__(self, scenarios: Sequence[Scenario]) -> None:
+        if not scenarios:
+            raise ConfigError(None, "world", "an empty list of scenarios")
+        self.scenarios = list(scenarios)
+
+    def draw(self, rng: np.random.Generator) -> Scenario:
+        return self.scenarios[int(rng.integers(len(self.scenarios)))]
+
+
+class GeneratorSource:
+    """A fresh training-split scenario of a kind each episode (seed drawn from the env's generator)."""
+
+    def __init__(self, kind: str, difficulty: float = 0.5, template: Scenario | None = None) -> None:
+        self.kind, self.difficulty, self.template = kind, difficulty, template
+        generate(kind, 0, difficulty, "train", template)  # fail now, not at the first reset
+
+    def draw(self, rng: np.random.Generator) -> Scenario:
+        return generate(self.kind, int(rng.integers(2**31 - 1)), self.difficulty, "train", self.template)
+
+
+class FileSource:
+    """A world file; redrawn each episode only if it places objects at random (IR-SIM ``distribution``)."""
+
+    def __init__(self, path: str | Path) -> None:
+        from common.world_file import read_world_file, world_file_is_random
+
+        self.path = Path(path)
+        self.random = world_file_is_random(self.path)
+        self._read = read_world_file
+        self.scenario = read_world_file(self.path, seed=0)
+
+    def draw(self, rng: np.random.Generator) -> Scenario:
+        return self._read(self.path, seed=int(rng.integers(2**31 - 1))) if self.random else self.scenario
+
+
+def scenario_source(world: Scenario | str | Path | Sequence[Scenario] | ScenarioSource, difficulty: float = 0.5,
+                    template: Scenario | None = None) -> ScenarioSource:
+    """Interpret an env's ``world`` argument: a Scenario, a list of them, a generator kind or suite
+    name (``open``, ``sparse``, ``cluttered``, ``warehouse``, ``trap``), or a YAML path."""
+    if isinstance(world, Scenario):
+        return FixedSource(world)
+    if isinstance(world, (str, Path)):
+        if str(world) in KINDS:
+            return GeneratorSource(str(world), 1.0 if world == "warehouse" else difficulty, template)
+        if Path(world).suffix in (".yaml", ".yml") or Path(world).exists():
+            return FileSource(world)
+        raise ConfigError(None, "world", f"{str(world)!r} is neither a scenario kind ({', '.join(KINDS)}) nor a YAML file")
+    if isinstance(world, Sequence):
+        return ListSource(world)
+    if hasattr(world, "draw"):
+        return world
+    raise ConfigError(None, "world", f"expected a Scenario, a kind name or a YAML path, got {type(world).__name__}")

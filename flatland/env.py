@@ -1,0 +1,81 @@
+"""``flatland/Nav-v0``: drive a differential-drive robot to a goal in a 2D world."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from common.nav_env import NavigationEnv
+from common.scenario import Scenario
+from flatland.render import Renderer
+from flatland.world import World
+
+
+class NavEnv(NavigationEnv):
+    """
+    ## Description
+    A differential-drive robot must reach a goal in a 2D world of static obstacles (circles, boxes,
+    polygons, segments), seeing it through a 2D lidar, as in the 2D tutorial on IR-SIM. The world is
+    a :class:`flatland.World` (``env.unwrapped.world``), built per episode from a scenario.
+
+    ## Action Space
+    ``Box(-1, 1, (2,), float32)``: a[0] -> linear velocity v in [0, v_max] (forward only), a[1] ->
+    angular velocity w in [-w_max, w_max], with the scenario's robot limits (default 1 m/s, 1 rad/s).
+
+    ## Observation Space
+    ``observation="nav7"`` (default, the tutorial's 7 values) or ``"lidar43"`` (36 lidar sectors);
+    normalised ``Box`` in [-1, 1]; the index tables are in :mod:`common.observations`.
+
+    ## Rewards
+    A weighted sum of named terms (:mod:`common.rewards`); ``reward="tutorial2d"`` (default) is the
+    tutorial's progress reward: 10 x metres gained, -5 x (|w| - 0.8) above 0.8 rad/s, -5 within
+    0.3 m and -1 within 0.5 m of an obstacle, +100 at the goal. ``info["reward_terms"]`` holds each
+    term's share of the step's reward.
+
+    ## Starting State
+    The scenario's start pose, at rest. With a generator kind as ``world``, each reset draws a new
+    scenario from the env's seeded generator.
+
+    ## Episode End
+    Terminated when the goal is within ``goal_threshold`` (``info["is_success"]``) or the robot
+    touches an obstacle or wall (``info["collided"]``: a crash is terminal, not a truncation).
+    Truncated after ``max_steps`` steps (default 500).
+
+    ## Arguments
+    ``gymnasium.make("flatland/Nav-v0", world="sparse", observation="nav7", reward="tutorial2d",
+    render_mode=None, max_steps=500, difficulty=0.5, goal_distance_scale=10.0, template=None)``
+
+    * ``world``: a :class:`Scenario`, a list of them, a kind (``open``, ``sparse``, ``cluttered``,
+      ``warehouse``, ``trap``) or the path of a scenario or IR-SIM world YAML.
+    * ``render_mode``: ``None``, ``"human"`` (a matplotlib window) or ``"rgb_array"``.
+    * ``difficulty``: 0 to 1, for generator kinds; ``template``: the robot, lidar and world size
+      the generator uses.
+
+    ## Example
+    >>> import gymnasium as gym, flatland
+    >>> env = gym.make("flatland/Nav-v0", world="sparse")
+    >>> observation, info = env.reset(seed=0)
+    >>> observation, reward, terminated, truncated, info = env.step(env.action_space.sample())
+    """
+
+    def __init__(self, **kwargs) -> None:
+        self._renderer: Renderer | None = None
+        super().__init__(**kwargs)
+
+    def _build_world(self, scenario: Scenario) -> World:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+        return World(scenario)
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode is None or self.readings is None:
+            return None
+        if self._renderer is None:
+            self._renderer = Renderer(self.scenario, human=self.render_mode == "human")
+        self._renderer.draw(self.readings, self.trajectory)
+        return self._renderer.frame() if self.render_mode == "rgb_array" else None
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

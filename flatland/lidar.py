@@ -1,0 +1,171 @@
+"""A 2D lidar: beams against circles, oriented boxes and segments in one compiled loop.
+
+Each primitive is tested only against the beams inside the angular window its bounding circle
+subtends, so a 36-beam scan of a 31-obstacle warehouse costs a few hundred ray tests instead of
+over a thousand, and a 720-beam scan is not 20 times slower. One Python call per beam (e.g.
+pymunk segment queries) would cost more than the rest of an env step.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from common.scenario import LidarSpec
+
+_EPS = 1e-9  # a hit nearer than this is the sensor's own surface, not an obstacle
+_TWO_PI = 2.0 * math.pi
+
+
+@njit(cache=True, inline="always")
+def _hit_circle(ox, oy, dx, dy, cx, cy, r):
+    fx, fy = ox - cx, oy - cy
+    c = fx * fx + fy * fy - r * r
+    b = fx * dx + fy * dy
+    disc = b * b - c
+    if disc < 0.0:
+        return math.inf
+    # From inside, the beam reads where it leaves the obstacle, as in IR-SIM.
+    return -b - math.sqrt(disc) if c > 0.0 else -b + math.sqrt(disc)
+
+
+@njit(cache=True, inline="always")
+def _hit_box(ox, oy, dx, dy, cx, cy, cos_yaw, sin_yaw, half_length, half_width):
+    # Slab test in the box's frame: one test per box instead of four edge tests.
+    rx, ry = ox - cx, oy - cy
+    px, py = cos_yaw * rx + sin_yaw * ry, -sin_yaw * rx + cos_yaw * ry
+    qx, qy = cos_yaw * dx + sin_yaw * dy, -sin_yaw * dx + cos_yaw * dy
+    t_near, t_far = -math.inf, math.inf
+    if qx == 0.0:
+        if abs(px) > half_length:
+            return math.inf
+    else:
+        t1, t2 = (-half_length - px) / qx, (half_length - px) / qx
+        t_near, t_far = max(t_near, min(t1, t2)), min(t_far, max(t1, t2))
+    if qy == 0.0:
+        if abs(py) > half_width:
+            return math.inf
+    else:
+        t1, t2 = (-half_width - py) / qy, (half_width - py) / qy
+        t_near, t_far = max(t_near, min(t1, t2)), min(t_far, max(t1, t2))
+    if t_far < t_near:
+        return math.inf
+    return t_near if t_near > _EPS else t_far
+
+
+@njit(cache=True, inline="always")
+def _hit_segment(ox, oy, dx, dy, x1, y1, x2, y2):
+    ex, ey = x2 - x1, y2 - y1
+    denom = dx * ey - dy * ex
+    if denom == 0.0:
+        return math.inf
+    wx, wy = x1 - ox, y1 - oy
+    u = (wx * dy - wy * dx) / denom
+    if u < 0.0 or u > 1.0:
+        return math.inf
+    return (wx * ey - wy * ex) / denom
+
+
+@njit(cache=True)
+def _window(ox, oy, cx, cy, radius, a0, delta, n, range_max, bounds):
+    """Beam index ranges [lo, hi] (up to three, for wrap-around) that may hit a bounding circle.
+    Returns how many ranges were written into ``bounds``; 0 when the circle is out of range."""
+    d = math.hypot(cx - ox, cy - oy)
+    if d - radius >= range_max:
+        return 0
+    if d <= radius or delta == 0.0:
+        bounds[0, 0], bounds[0, 1] = 0, n - 1
+        return 1
+    half = math.asin(radius / d)
+    centre = (math.atan2(cy - oy, cx - ox) - a0) % _TWO_PI
+    count = 0
+    for shift in (-_TWO_PI, 0.0, _TWO_PI):
+        lo = max(0, int(math.floor((centre + shift - half) / delta)))
+        hi = min(n - 1, int(math.ceil((centre + shift + half) / delta)))
+        if lo <= hi:
+            bounds[count, 0], bounds[count, 1] = lo, hi
+            count += 1
+    return count
+
+
+@njit(cache=True)
+def cast_scan(ox, oy, a0, delta, circles, boxes, segments, range_max, out):
+    """Fill ``out`` (n beams at world angles a0 + k * delta) with the distance from (ox, oy) to the
+    first circle (rows x, y, r), box (rows x, y, cos yaw, sin yaw, half length, half width) or
+    segment (rows x1, y1, x2, y2), or ``range_max`` where nothing is nearer."""
+    n = out.shape[0]
+    dirs = np.empty((n, 2))
+    for k in range(n):
+        dirs[k, 0] = math.cos(a0 + k * delta)
+        dirs[k, 1] = math.sin(a0 + k * delta)
+        out[k] = range_max
+    bounds = np.empty((3, 2), dtype=np.int64)
+    for i in range(circles.shape[0]):
+        cx, cy, r = circles[i, 0], circles[i, 1], circles[i, 2]
+        for w in range(_window(ox, oy, cx, cy, r, a0, delta, n, range_max, bounds)):
+            for k in range(bounds[w, 0], bounds[w, 1] + 1):
+                t = _hit_circle(ox, oy, dirs[k, 0], dirs[k, 1], cx, cy, r)
+                if _EPS < t < out[k]:
+                    out[k] = t
+    for i in range(boxes.shape[0]):
+        radius = math.hypot(boxes[i, 4], boxes[i, 5])
+        for w in range(_window(ox, oy, boxes[i, 0], boxes[i, 1], radius, a0, delta, n, range_max, bounds)):
+            for k in range(bounds[w, 0], bounds[w, 1] + 1):
+                t = _hit_box(ox, oy, dirs[k, 0], dirs[k, 1], boxes[i, 0], boxes[i, 1], boxes[i, 2], boxes[i, 3],
+                             boxes[i, 4], boxes[i, 5])
+                if _EPS < t < out[k]:
+                    out[k] = t
+    for i in range(segments.shape[0]):
+        x1, y1, x2, y2 = segments[i, 0], segments[i, 1], segments[i, 2], segments[i, 3]
+        radius = 0.5 * math.hypot(x2 - x1, y2 - y1)
+        for w in range(_window(ox, oy, 0.5 * (x1 + x2), 0.5 * (y1 + y2), radius, a0, delta, n, range_max, bounds)):
+            for k in range(bounds[w, 0], bounds[w, 1] + 1):
+                t = _hit_segment(ox, oy, dirs[k, 0], dirs[k, 1], x1, y1, x2, y2)
+                if _EPS < t < out[k]:
+                    out[k] = t
+
+
+class Lidar:
+    """A lidar mounted on the robot, scanning a fixed set of primitives.
+
+    Args:
+        spec: beams, ranges, angular range, mounting offset (x, y, yaw in the robot frame), noise.
+        circles: (K, 3) array of x, y, radius.
+        boxes: (B, 6) array of x, y, cos yaw, sin yaw, half length, half width.
+        segments: (M, 4) array of x1, y1, x2, y2.
+        rng: the generator the Gaussian range noise is drawn from.
+    """
+
+    def __init__(self, spec: LidarSpec, circles: np.ndarray, boxes: np.ndarray, segments: np.ndarray,
+                 rng: np.random.Generator) -> None:
+        self.spec = spec
+        self.circles = np.ascontiguousarray(circles, dtype=np.float64).reshape(-1, 3)
+        self.boxes = np.ascontiguousarray(boxes, dtype=np.float64).reshape(-1, 6)
+        self.segments = np.ascontiguousarray(segments, dtype=np.float64).reshape(-1, 4)
+        self.rng = rng
+        angles = spec.beam_angles()
+        self._first = float(angles[0]) + spec.offset[2]
+        self._delta = float(angles[1] - angles[0]) if spec.beams > 1 else 0.0
+
+    def origin(self, x: float, y: float, yaw: float) -> tuple[float, float]:
+        """The sensor's position for a robot pose."""
+        mx, my, _ = self.spec.offset
+        c, s = math.cos(yaw), math.sin(yaw)
+        return x + c * mx - s * my, y + s * mx + c * my
+
+    def scan(self, x: float, y: float, yaw: float) -> np.ndarray:
+        """Ranges for a robot at (x, y, yaw), in beam order; a new array each call."""
+        ox, oy = self.origin(x, y, yaw)
+        ranges = np.empty(self.spec.beams)
+        cast_scan(ox, oy, yaw + self._first, self._delta, self.circles, self.boxes, self.segments,
+                  self.spec.range_max, ranges)
+        if self.spec.noise_std > 0.0:
+            # Only returns carry noise; a beam that hit nothing keeps reading range_max (IR-SIM does the same).
+            hits = ranges < self.spec.range_max
+            ranges[hits] += self.rng.normal(0.0, self.spec.noise_std, int(hits.sum()))
+            np.minimum(ranges, self.spec.range_max, out=ranges)
+        if self.spec.range_min > 0.0 or self.spec.noise_std > 0.0:
+            np.maximum(ranges, self.spec.range_min, out=ranges)
+        return ranges

@@ -1,0 +1,155 @@
+"""Matplotlib drawing of a flatland world: obstacles, robot, lidar beams, goal, trajectory.
+
+``rgb_array`` frames come from an off-screen Agg canvas (no display needed); ``human`` uses a
+pyplot window. Static parts are drawn once; each frame only moves the robot, beams and path.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+from matplotlib import patches
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+
+from common.readings import Readings
+from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, SegmentObstacle
+
+
+def _obstacle_patch(obstacle) -> patches.Patch | None:
+    style = dict(facecolor="0.35" if not obstacle.unobstructed else "0.8", edgecolor="0.1", linewidth=0.8)
+    if isinstance(obstacle, CircleObstacle):
+        return patches.Circle((obstacle.x, obstacle.y), obstacle.radius, **style)
+    if isinstance(obstacle, BoxObstacle):
+        return patches.Polygon(obstacle.corners(), closed=True, **style)
+    if isinstance(obstacle, PolygonObstacle):
+        return patches.Polygon(np.asarray(obstacle.vertices), closed=True, **style)
+    return None
+
+
+class Renderer:
+    """Draws one scenario; call :meth:`draw` per step, then :meth:`frame` for pixels."""
+
+    def __init__(self, scenario: Scenario, human: bool = False, size_inches: float = 5.0, dpi: int = 96) -> None:
+        self.scenario = scenario
+        self.human = human
+        if human:
+            import matplotlib.pyplot as plt
+
+            plt.ion()
+            self.figure = plt.figure(figsize=(size_inches, size_inches), dpi=dpi)
+        else:
+            self.figure = Figure(figsize=(size_inches, size_inches), dpi=dpi)
+            FigureCanvasAgg(self.figure)
+        self.axes = self.figure.add_subplot(1, 1, 1)
+        self._draw_static()
+        robot = scenario.robot
+        if robot.shape == "circle":
+            self.robot_patch: patches.Patch = patches.Circle((0, 0), robot.radius, facecolor="tab:blue", alpha=0.8)
+        else:
+            self.robot_patch = patches.Polygon(np.zeros((4, 2)), closed=True, facecolor="tab:blue", alpha=0.8)
+        self.axes.add_patch(self.robot_patch)
+        (self.heading_line,) = self.axes.plot([], [], color="white", linewidth=1.5)
+        (self.path_line,) = self.axes.plot([], [], color="tab:blue", linewidth=1.0, alpha=0.7)
+        self.beams = LineCollection([], colors="tab:red", linewidths=0.5, alpha=0.5)
+        self.axes.add_collection(self.beams)
+        self.title = self.axes.set_title("")
+
+    def _draw_static(self) -> None:
+        ax, world = self.axes, self.scenario.world
+        x0, y0 = world.offset
+        margin = 0.2
+        ax.set_xlim(x0 - margin, x0 + world.width + margin)
+        ax.set_ylim(y0 - margin, y0 + world.height + margin)
+        ax.set_aspect("equal")
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("y [m]")
+        if world.walls:
+            ax.add_patch(patches.Rectangle((x0, y0), world.width, world.height, fill=False, edgecolor="black", linewidth=2))
+        for obstacle in self.scenario.obstacles:
+            patch = _obstacle_patch(obstacle)
+            if patch is not None:
+                ax.add_patch(patch)
+            elif isinstance(obstacle, SegmentObstacle):
+                pts = np.asarray(obstacle.points)
+                ax.plot(pts[:, 0], pts[:, 1], color="0.1", linewidth=2)
+        gx, gy = self.scenario.goal
+        ax.add_patch(patches.Circle((gx, gy), self.scenario.goal_threshold, facecolor="tab:green", alpha=0.4))
+        ax.plot([gx], [gy], marker="*", color="tab:green", markersize=12)
+
+    def draw(self, readings: Readings, trajectory: Sequence[tuple[float, float]] = (), caption: str = "") -> None:
+        """Move the robot, its beams and its path to ``readings``."""
+        x, y, yaw = readings.pose
+        robot = self.scenario.robot
+        if isinstance(self.robot_patch, patches.Circle):
+            self.robot_patch.center = (x, y)
+            reach = robot.radius
+        else:
+            c, s = math.cos(yaw), math.sin(yaw)
+            hl, hw = 0.5 * robot.length, 0.5 * robot.width
+            local = np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]])
+            self.robot_patch.set_xy(local @ np.array([[c, s], [-s, c]]) + (x, y))
+            reach = hl
+        self.heading_line.set_data([x, x + reach * math.cos(yaw)], [y, y + reach * math.sin(yaw)])
+        lidar = self.scenario.lidar
+        ox = x + math.cos(yaw) * lidar.offset[0] - math.sin(yaw) * lidar.offset[1]
+        oy = y + math.sin(yaw) * lidar.offset[0] + math.cos(yaw) * lidar.offset[1]
+        angles = yaw + lidar.offset[2] + lidar.beam_angles()
+        ends = np.column_stack([ox + readings.lidar * np.cos(angles), oy + readings.lidar * np.sin(angles)])
+        self.beams.set_segments([[(ox, oy), tuple(end)] for end in ends])
+        if len(trajectory):
+            path = np.asarray(trajectory)
+            self.path_line.set_data(path[:, 0], path[:, 1])
+        self.title.set_text(caption or f"t = {readings.time:.1f} s" + ("  collision" if readings.collided else ""))
+        if self.human:
+            import matplotlib.pyplot as plt
+
+            self.figure.canvas.draw_idle()
+            plt.pause(0.001)
+
+    def frame(self) -> np.ndarray:
+        """The current picture as an (H, W, 3) uint8 array."""
+        canvas = self.figure.canvas
+        canvas.draw()
+        return np.asarray(canvas.buffer_rgba())[..., :3].copy()
+
+    def close(self) -> None:
+        if self.human:
+            import matplotlib.pyplot as plt
+
+            plt.close(self.figure)
+
+
+def save_gif(frames: Sequence[np.ndarray], path: str | Path, fps: float = 10.0) -> Path:
+    """Write RGB frames as an animated GIF."""
+    from PIL import Image
+
+    if not frames:
+        raise ValueError("no frames to write")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    images = [Image.fromarray(frame) for frame in frames]
+    images[0].save(path, save_all=True, append_images=images[1:], duration=int(round(1000 / fps)), loop=0)
+    return path
+
+
+def record_episode(env, act: Callable[[np.ndarray], np.ndarray], path: str | Path, seed: int | None = None,
+                   every: int = 1) -> tuple[Path, dict]:
+    """Run one episode of an ``rgb_array`` env with ``act(observation) -> action``; save it as a GIF.
+
+    Returns the GIF's path and the last step's info.
+    """
+    observation, info = env.reset(seed=seed)
+    frames = [env.render()]
+    done, step = False, 0
+    while not done:
+        observation, _, terminated, truncated, info = env.step(act(observation))
+        done = terminated or truncated
+        step += 1
+        if step % every == 0 or done:
+            frames.append(env.render())
+    return save_gif(frames, path, fps=env.metadata.get("render_fps", 10) / every), info

@@ -1,0 +1,1 @@
+"""The 3D tier (PyBullet warehouse): built in a later milestone."""

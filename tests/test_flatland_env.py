@@ -1,0 +1,125 @@
+"""The flatland/Nav-v0 env: checkers, determinism, bounds, episode ends, rendering."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+import flatland  # noqa: F401
+from common.scenario import CircleObstacle, Scenario
+from flatland.world import World
+
+
+def make(**kwargs):
+    return gym.make("flatland/Nav-v0", **kwargs)
+
+
+@pytest.mark.parametrize("observation", ["nav7", "lidar43"])
+def test_env_passes_gymnasium_and_sb3_checkers(observation):
+    env = make(world="sparse", observation=observation)
+    check_env(env.unwrapped)
+    sb3_check_env(env.unwrapped)
+
+
+def _rollout(env, seed: int, steps: int = 200) -> list:
+    observation, _ = env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    trace = [observation]
+    for _ in range(steps):
+        observation, reward, terminated, truncated, _ = env.step(rng.uniform(-1, 1, 2).astype(np.float32))
+        trace.append((observation, reward, terminated, truncated))
+        if terminated or truncated:
+            trace.append(env.reset()[0])
+    return trace
+
+
+def _same(a, b) -> bool:
+    return all(
+        np.array_equal(x[0], y[0]) and x[1:] == y[1:] if isinstance(x, tuple) else np.array_equal(x, y)
+        for x, y in zip(a, b, strict=True)
+    )
+
+
+@pytest.mark.parametrize("world", ["cluttered", "warehouse"])
+def test_reset_with_the_same_seed_replays_the_same_episodes(world):
+    noisy = Scenario().model_copy(update={"lidar": Scenario().lidar.model_copy(update={"noise_std": 0.05})})
+    for kwargs in ({"world": world}, {"world": noisy}):
+        env = make(observation="lidar43", **kwargs)
+        assert _same(_rollout(env, 3), _rollout(env, 3))
+        assert not _same(_rollout(env, 3), _rollout(env, 4))
+
+
+def test_observations_stay_within_bounds_over_long_random_rollouts():
+    for observation in ("nav7", "lidar43"):
+        env = make(world="cluttered", observation=observation)
+        space = env.observation_space
+        for item in _rollout(env, 0, steps=3000):
+            obs = item[0] if isinstance(item, tuple) else item
+            assert space.contains(obs), obs
+
+
+def test_driving_into_an_obstacle_terminates_with_a_collision():
+    scenario = Scenario(start=(2, 5, 0), goal=(8, 5), obstacles=[CircleObstacle(x=4, y=5, radius=0.5)])
+    env = make(world=scenario, reward="tutorial3d")
+    env.reset(seed=0)
+    for step in range(100):
+        _, reward, terminated, truncated, info = env.step(np.array([1.0, 0.0], dtype=np.float32))
+        if terminated:
+            break
+    assert terminated and not truncated and info["collided"] and not info["is_success"]
+    assert info["reward_terms"]["collision"] == -10.0
+    assert 10 <= step <= 15  # 1.3 m to contact at 0.1 m per step
+
+
+def test_reaching_the_goal_terminates_with_success_and_the_bonus():
+    scenario = Scenario(start=(2, 5, 0), goal=(4, 5))
+    env = make(world=scenario)
+    env.reset(seed=0)
+    for _ in range(40):
+        _, reward, terminated, truncated, info = env.step(np.array([1.0, 0.0], dtype=np.float32))
+        if terminated:
+            break
+    assert info["is_success"] and not info["collided"] and info["reward_terms"]["goal"] == 100.0
+
+
+def test_truncation_after_max_steps():
+    env = make(world=Scenario(start=(2, 5, 0), goal=(8, 5)), max_steps=7)
+    env.reset(seed=0)
+    ends = [env.step(np.array([-1.0, 0.0], dtype=np.float32))[2:4] for _ in range(7)]
+    assert ends[-1] == (False, True) and all(end == (False, False) for end in ends[:-1])
+
+
+def test_actions_map_to_forward_only_velocities():
+    env = make(world=Scenario(start=(2, 5, 0), goal=(8, 5)))
+    env.reset(seed=0)
+    env.step(np.array([-1.0, 1.0], dtype=np.float32))
+    assert env.unwrapped.readings.velocity == (0.0, 1.0)
+    env.step(np.array([1.0, -1.0], dtype=np.float32))
+    assert env.unwrapped.readings.velocity == (1.0, -1.0)
+
+
+def test_world_argument_accepts_a_yaml_path(tmp_path):
+    path = tmp_path / "s.yaml"
+    path.write_text(Scenario(name="from-file").to_yaml())
+    env = make(world=str(path))
+    env.reset(seed=0)
+    assert isinstance(env.unwrapped.world, World)
+    assert env.unwrapped.scenario.name == "from-file"
+
+
+def test_rgb_array_frames_and_gif(tmp_path):
+    from flatland.render import record_episode
+
+    env = make(world="sparse", render_mode="rgb_array", max_steps=20)
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.ndim == 3 and frame.shape[2] == 3 and frame.dtype == np.uint8
+    assert frame.std() > 0  # something was drawn
+    path, info = record_episode(env, lambda obs: np.array([0.0, 0.3]), tmp_path / "ep.gif", seed=0)
+    from PIL import Image
+
+    with Image.open(path) as gif:
+        assert gif.n_frames >= 2

@@ -1,0 +1,141 @@
+"""Scenario model, YAML round trip, generators, suites and reachability."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from common.errors import ConfigError
+from common.generators import KINDS, SUITES, generate, get_suite
+from common.occupancy import goal_reachable, scenario_grid
+from common.scenario import (
+    BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, SegmentObstacle, load_scenario, save_scenario,
+)
+
+
+def test_yaml_round_trip_keeps_every_obstacle_kind(tmp_path):
+    scenario = Scenario(
+        name="all-kinds",
+        obstacles=[
+            CircleObstacle(x=5, y=5, radius=0.5),
+            BoxObstacle(x=3, y=7, length=1.0, width=0.4, yaw=0.3),
+            PolygonObstacle(vertices=[(6, 1), (7, 1), (6.5, 2)]),
+            SegmentObstacle(points=[(8, 6), (8, 8), (9, 8)]),
+        ],
+    )
+    path = tmp_path / "s.yaml"
+    save_scenario(scenario, path)
+    assert load_scenario(path) == scenario
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_generated_scenarios_round_trip_and_are_valid(kind, tmp_path):
+    scenario = generate(kind, seed=3)
+    path = tmp_path / f"{kind}.yaml"
+    save_scenario(scenario, path)
+    assert load_scenario(path) == scenario
+    assert goal_reachable(scenario)
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_generators_are_deterministic_and_seed_sensitive(kind):
+    assert generate(kind, 7) == generate(kind, 7)
+    assert generate(kind, 7) != generate(kind, 8)
+
+
+def test_train_and_eval_splits_differ_for_the_same_seed():
+    assert generate("cluttered", 5, split="train").obstacles != generate("cluttered", 5, split="eval").obstacles
+
+
+def test_warehouse_has_31_obstacles():
+    for seed in range(5):
+        assert len(generate("warehouse", seed, 1.0).obstacles) == 31
+
+
+def _min_gap(scenario: Scenario) -> float:
+    """Smallest distance between two obstacles, measured on one's outline against the other's SDF."""
+    from common.generators import _outline
+
+    gaps = []
+    for i, a in enumerate(scenario.obstacles):
+        for b in scenario.obstacles[i + 1:]:
+            gaps.append(min(b.sdf(_outline(a, 64)).min(), a.sdf(_outline(b, 64)).min()))
+    return min(gaps)
+
+
+@pytest.mark.parametrize("kind", ["sparse", "cluttered", "warehouse"])
+def test_generated_obstacles_do_not_overlap_and_leave_the_robot_a_gap(kind):
+    for seed in range(5):
+        scenario = generate(kind, seed)
+        # The outline is sampled, so allow the sagitta of its sampling.
+        assert _min_gap(scenario) >= 2 * scenario.robot.bounding_radius - 0.02
+
+
+def test_start_and_goal_are_clear_of_obstacles():
+    for kind in KINDS:
+        for seed in range(5):
+            s = generate(kind, seed)
+            assert s.signed_distance(np.array([s.start[:2]]))[0] >= s.robot.bounding_radius
+            assert s.signed_distance(np.array([s.goal]))[0] > 0
+
+
+def test_difficulty_adds_obstacles():
+    easy = np.mean([len(generate("cluttered", s, 0.0).obstacles) for s in range(5)])
+    hard = np.mean([len(generate("cluttered", s, 1.0).obstacles) for s in range(5)])
+    assert hard > easy
+
+
+def test_trap_blocks_the_straight_line_to_the_goal():
+    for seed in range(10):
+        s = generate("trap", seed)
+        line = np.linspace(s.start[:2], s.goal, 200)
+        assert (s.signed_distance(line) < s.robot.radius).any(), "the trap must sit on the direct route"
+
+
+def test_unreachable_goal_is_detected():
+    wall = BoxObstacle(x=5, y=5, length=0.2, width=10.0)  # splits the walled world in two
+    scenario = Scenario(start=(2, 5, 0), goal=(8, 5), obstacles=[wall])
+    assert not goal_reachable(scenario)
+    assert goal_reachable(scenario.model_copy(update={"goal": (3, 8)}))
+
+
+def test_grid_marks_inflated_obstacles_and_walls():
+    scenario = Scenario(obstacles=[CircleObstacle(x=5, y=5, radius=1.0)])
+    grid = scenario_grid(scenario, resolution=0.2)
+    assert grid.occupied.shape == (50, 50)
+    assert grid.occupied[grid.cell_of(5, 5)]
+    assert grid.occupied[grid.cell_of(6.1, 5)]  # within radius + inflation
+    assert not grid.occupied[grid.cell_of(6.5, 5)]
+    assert grid.occupied[grid.cell_of(0.05, 5)]  # the wall, inflated
+
+
+def test_suites_are_reproducible_and_shifted_by_seed():
+    suite = get_suite("sparse")
+    first = list(suite.scenarios(count=3))
+    assert first == list(suite.scenarios(count=3))
+    shifted = list(suite.scenarios(count=3, seed=1))
+    assert shifted[0] == first[1]
+    assert set(SUITES) == set(KINDS)
+
+
+def test_unknown_suite_and_kind_name_the_allowed_values():
+    with pytest.raises(ConfigError, match="allowed: open, sparse"):
+        get_suite("nope")
+    with pytest.raises(ConfigError, match="kind"):
+        generate("nope", 0)
+
+
+def test_check_rejects_goal_inside_obstacle_and_start_outside_world():
+    with pytest.raises(ConfigError, match="goal.*inside an obstacle"):
+        Scenario(goal=(5, 5), obstacles=[CircleObstacle(x=5, y=5, radius=1)]).check("f.yaml")
+    with pytest.raises(ConfigError, match="start.*outside the world"):
+        Scenario(start=(12, 1, 0)).check("f.yaml")
+    with pytest.raises(ConfigError, match="start.*robot's radius"):
+        Scenario(start=(5, 5, 0), obstacles=[CircleObstacle(x=5.3, y=5, radius=0.2)]).check()
+
+
+def test_box_corners_follow_yaw():
+    box = BoxObstacle(x=0, y=0, length=2, width=1, yaw=math.pi / 2)
+    np.testing.assert_allclose(np.sort(box.corners()[:, 0]), [-0.5, -0.5, 0.5, 0.5], atol=1e-12)
