@@ -2,9 +2,9 @@
 
 The robot moves by the unicycle update (IR-SIM's Euler step by default), not by forces: the 2D
 tier is a kinematic simulator, and pymunk supplies the collision geometry (circles, convex boxes
-and polygons, segments). Collisions follow IR-SIM's ``stop`` mode: the robot halts at the first
-pose that touches something and stays there, velocity zero, until reset. A step longer than the
-robot's inner radius is swept in sub-steps, so no obstacle can be jumped over at any speed.
+and polygons, segments). Collisions follow IR-SIM's ``stop`` mode: the robot halts at a pose that
+touches something and stays there, velocity zero, until reset. Every move is also swept, so no
+obstacle can be jumped over or grazed unseen at any speed.
 """
 
 from __future__ import annotations
@@ -21,6 +21,8 @@ from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenar
 from flatland.lidar import Lidar
 
 GRAVITY = 9.81
+_ROBOT_CATEGORY = 0b10
+_BOX_SEARCH_STEP = 0.01  # m: path resolution when a box footprint's swept bound touches something
 
 
 def _is_convex(vertices: np.ndarray) -> bool:
@@ -120,10 +122,11 @@ class World:
         self.body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
         if robot.shape == "circle":
             self.footprint: pymunk.Shape = pymunk.Circle(self.body, robot.radius)
-            self._sweep_step = robot.radius
         else:
             self.footprint = pymunk.Poly.create_box(self.body, (robot.length, robot.width))
-            self._sweep_step = 0.5 * min(robot.length, robot.width)
+        self._sweep_radius = robot.bounding_radius
+        self.footprint.filter = pymunk.ShapeFilter(categories=_ROBOT_CATEGORY)
+        self._not_robot = pymunk.ShapeFilter(mask=pymunk.ShapeFilter.ALL_MASKS() ^ _ROBOT_CATEGORY)
         self.space.add(self.body, self.footprint)
 
     def overlaps(self, pose: Pose2D) -> bool:
@@ -170,15 +173,37 @@ class World:
         return min(max(v, v_lo), v_hi), min(max(w, w_lo), w_hi)
 
     def _sweep(self, start: Pose2D, end: Pose2D) -> tuple[Pose2D, bool]:
-        """The first pose along start -> end that touches something (and True), else (end, False)."""
-        substeps = max(1, math.ceil(math.hypot(end[0] - start[0], end[1] - start[1]) / self._sweep_step))
+        """Where the robot ends a move from ``start`` to ``end``, and whether it collided.
+
+        As in IR-SIM's stop mode, a move whose end pose overlaps something halts there. A contact
+        that end-pose check would miss (a thin or small obstacle passed between the two poses)
+        halts the robot at its first touching pose instead: the swept footprint is checked too.
+        """
+        # The box around the swept bounding circle holds both poses: nothing in it, nothing touched.
+        # (Space.segment_query with a radius is no substitute: chipmunk walks its tree with the bare
+        # segment and misses shapes that only the radius reaches.)
+        r = self._sweep_radius
+        box = pymunk.BB(min(start[0], end[0]) - r, min(start[1], end[1]) - r,
+                        max(start[0], end[0]) + r, max(start[1], end[1]) + r)
+        candidates = self.space.bb_query(box, self._not_robot)
+        if not candidates:
+            return end, False
+        if self.overlaps(end):
+            return end, True
         turn = wrap_angle(end[2] - start[2])
+        along = lambda f: Pose2D(start[0] + f * (end[0] - start[0]), start[1] + f * (end[1] - start[1]),
+                                 wrap_angle(start[2] + f * turn))
+        if self.scenario.robot.shape == "circle":
+            # The swept circle is the footprint: the earliest alpha is the first contact.
+            hits = [hit.alpha for hit in (shape.segment_query(start[:2], end[:2], r) for shape in candidates) if hit]
+            return (along(min(hits)), True) if hits else (end, False)
+        # The swept bounding circle only says a box footprint may touch: search the path finely.
+        substeps = max(1, math.ceil(math.hypot(end[0] - start[0], end[1] - start[1]) / _BOX_SEARCH_STEP))
         for k in range(1, substeps):
-            f = k / substeps
-            pose = Pose2D(start[0] + f * (end[0] - start[0]), start[1] + f * (end[1] - start[1]), wrap_angle(start[2] + f * turn))
+            pose = along(k / substeps)
             if self.overlaps(pose):
                 return pose, True
-        return end, self.overlaps(end)
+        return end, False
 
     def _read(self, acceleration: float) -> Readings:
         x, y, yaw = self.pose
