@@ -1,0 +1,1 @@
+"""Classical navigation controllers that read only a real robot's sensors."""

@@ -1,0 +1,1 @@
+"""Grid planners (A*, RRT) on occupancy grids from lidar scans or from a scenario."""
