@@ -7,11 +7,15 @@ the planners' shortest paths for SPL.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy import ndimage
 
 from common.scenario import Scenario
+
+if TYPE_CHECKING:  # a runtime import would tie the grid module to the controllers package
+    from common.controllers.base import LidarGeometry
 
 
 @dataclass(frozen=True)
@@ -35,6 +39,17 @@ class OccupancyGrid:
             self.origin[0] + (col + 0.5) * self.resolution,
             self.origin[1] + (row + 0.5) * self.resolution,
         )
+
+    def inside(self, x: float, y: float) -> bool:
+        """Whether world point (x, y) lies on the grid (``cell_of`` clamps, so check this first)."""
+        rows, cols = self.occupied.shape
+        u = (x - self.origin[0]) / self.resolution
+        v = (y - self.origin[1]) / self.resolution
+        return 0.0 <= u < cols and 0.0 <= v < rows
+
+    def is_free(self, x: float, y: float) -> bool:
+        """Whether (x, y) lies on the grid in a free cell."""
+        return self.inside(x, y) and not self.occupied[self.cell_of(x, y)]
 
     def free_component(self, x: float, y: float) -> np.ndarray:
         """Mask of the free cells 8-connected to the cell of (x, y); all False if that cell is occupied."""
@@ -74,3 +89,81 @@ def goal_reachable(scenario: Scenario, resolution: float = 0.1) -> bool:
     cy = grid.origin[1] + (rows + 0.5) * resolution
     gx, gy = scenario.goal
     return bool(np.any(np.hypot(cx - gx, cy - gy) <= scenario.goal_threshold))
+
+
+def inflate(occupied: np.ndarray, radius: float, resolution: float) -> np.ndarray:
+    """Cells whose centre lies within ``radius`` of an occupied cell's centre.
+
+    A Euclidean distance transform gives the disk for any radius in one pass (no structuring
+    element to build per radius); ``radius`` 0 returns a copy.
+    """
+    if radius <= 0.0 or not occupied.any():
+        # edt of an array without zeros has no background to measure from: nothing to inflate.
+        return occupied.copy()
+    distance = ndimage.distance_transform_edt(~occupied, sampling=resolution)
+    return distance <= radius + 1e-9
+
+
+class ScanMapper:
+    """An occupancy grid built from lidar returns over time.
+
+    A cell holding a return is occupied from then on (static worlds; no free-space clearing), and
+    unseen space counts as free, so a planner on :attr:`grid` is optimistic about what it has not
+    scanned and replans as returns arrive. ``world_bounds`` is (x0, y0, width, height).
+    """
+
+    def __init__(self, world_bounds: tuple[float, float, float, float], resolution: float = 0.2,
+                 inflation: float = 0.0) -> None:
+        x0, y0, width, height = world_bounds
+        self.origin = (float(x0), float(y0))
+        self.resolution = float(resolution)
+        self.inflation = float(inflation)
+        self.shape = (max(1, int(round(height / resolution))), max(1, int(round(width / resolution))))
+        self.hits = np.zeros(self.shape, dtype=np.int32)
+        self._grid: OccupancyGrid | None = None
+
+    @classmethod
+    def for_scenario(cls, scenario: Scenario, resolution: float = 0.2) -> "ScanMapper":
+        """A mapper over the scenario's world, inflated by the robot's bounding radius."""
+        world = scenario.world
+        bounds = (world.offset[0], world.offset[1], world.width, world.height)
+        return cls(bounds, resolution, scenario.robot.bounding_radius)
+
+    def reset(self) -> None:
+        """Forget every return."""
+        self.hits[:] = 0
+        self._grid = None
+
+    def add_points(self, points: np.ndarray) -> int:
+        """Mark the cells of world points (N, 2); return how many fell on the grid.
+
+        Points up to one cell outside the grid are clamped onto its edge (returns from boundary
+        walls lie exactly on it, and lidar noise pushes some just beyond); farther ones are dropped.
+        """
+        points = np.asarray(points, dtype=float).reshape(-1, 2)
+        rows, cols = self.shape
+        c = np.floor((points[:, 0] - self.origin[0]) / self.resolution).astype(np.int64)
+        r = np.floor((points[:, 1] - self.origin[1]) / self.resolution).astype(np.int64)
+        keep = (c >= -1) & (c <= cols) & (r >= -1) & (r <= rows)
+        flat = np.clip(r[keep], 0, rows - 1) * cols + np.clip(c[keep], 0, cols - 1)
+        if flat.size:
+            self.hits += np.bincount(flat, minlength=rows * cols).reshape(self.shape).astype(np.int32)
+            self._grid = None
+        return int(flat.size)
+
+    def add_scan(self, geometry: "LidarGeometry", ranges: np.ndarray, pose: tuple[float, float, float]) -> int:
+        """Mark the returns of one scan taken at ``pose`` (beams that hit nothing are ignored)."""
+        return self.add_points(geometry.returns_world_frame(np.asarray(ranges, dtype=float), pose))
+
+    @property
+    def observed(self) -> np.ndarray:
+        """Cells that hold at least one return (not inflated)."""
+        return self.hits > 0
+
+    @property
+    def grid(self) -> OccupancyGrid:
+        """The inflated grid for planning (cached until the next scan)."""
+        if self._grid is None:
+            occupied = inflate(self.observed, self.inflation, self.resolution)
+            self._grid = OccupancyGrid(occupied=occupied, origin=self.origin, resolution=self.resolution)
+        return self._grid
