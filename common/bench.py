@@ -18,6 +18,8 @@ import numpy as np
 import yaml
 
 from common.generators import SUITES
+from common.occupancy import OccupancyGrid, scenario_grid
+from common.planners import RRT, AStar, Planner, path_length
 from common.scenario import Scenario
 
 
@@ -83,6 +85,49 @@ def irsim_steps_per_s(scenario: Scenario, steps: int = 2_000, seed: int = 0) -> 
     return steps / elapsed
 
 
+def planner_pairs(scenario: Scenario, grid: OccupancyGrid, count: int = 20, seed: int = 0,
+                  min_distance: float = 2.0) -> list[tuple[tuple[float, float], tuple[float, float]]]:
+    """The scenario's start and goal, then free-cell centre pairs of the start's free component
+    at least ``min_distance`` apart (one component, so every pair has a path)."""
+    rows, cols = np.nonzero(grid.free_component(*scenario.start[:2]))
+    centres = np.column_stack([grid.origin[0] + (cols + 0.5) * grid.resolution,
+                               grid.origin[1] + (rows + 0.5) * grid.resolution])
+    rng = np.random.default_rng(seed)
+    pairs = [(tuple(scenario.start[:2]), tuple(scenario.goal))]
+    while len(pairs) < count:
+        a, b = centres[rng.integers(len(centres), size=2)]
+        if np.hypot(*(a - b)) >= min_distance:
+            pairs.append((tuple(a), tuple(b)))
+    return pairs
+
+
+def _time_planner(planner: Planner, grid: OccupancyGrid, pairs: list, repeats: int) -> tuple[float, float | None]:
+    """Median plan time (ms) over every pair and repeat, and mean length (m) of the paths found."""
+    planner.plan(grid, *pairs[0])  # warm-up: numba kernels compiled or loaded from cache
+    times, lengths = [], []
+    for start, goal in pairs:
+        for _ in range(repeats):
+            tic = time.perf_counter()
+            path = planner.plan(grid, start, goal)
+            times.append(time.perf_counter() - tic)
+            if path is not None:
+                lengths.append(path_length(path))
+    return 1e3 * float(np.median(times)), float(np.mean(lengths)) if lengths else None
+
+
+def planner_figures(scenario: Scenario, resolution: float = 0.2, count: int = 20, repeats: int = 5,
+                    seed: int = 0) -> dict[str, float | None]:
+    """A* and RRT on the scenario's ground-truth grid over ``count`` start/goal pairs, each planned
+    ``repeats`` times (RRT drawing fresh samples each time): median ms and mean path length."""
+    grid = scenario_grid(scenario, resolution)
+    pairs = planner_pairs(scenario, grid, count, seed)
+    astar_ms, astar_m = _time_planner(AStar(), grid, pairs, repeats)
+    rrt_ms, rrt_m = _time_planner(RRT(seed=seed), grid, pairs, repeats)
+    metres = lambda value: None if value is None else round(value, 2)
+    return {"astar_ms": round(astar_ms, 4), "rrt_ms": round(rrt_ms, 4),
+            "astar_path_m": metres(astar_m), "rrt_path_m": metres(rrt_m)}
+
+
 def run_benchmarks(steps: int = 20_000) -> dict[str, Any]:
     """All figures of this milestone, as one flat mapping."""
     scenario = bench_scenario()
@@ -95,4 +140,5 @@ def run_benchmarks(steps: int = 20_000) -> dict[str, Any]:
         "flatland_steps_per_s": round(flat, 1),
         "irsim_steps_per_s": None if irsim is None else round(irsim, 1),
         "flatland_vs_irsim": None if irsim is None else round(flat / irsim, 1),
+        **planner_figures(scenario),
     }
