@@ -1,10 +1,12 @@
-"""The ``curriculum`` command: validate, bench (run, eval, compare and render come with later milestones)."""
+"""The ``curriculum`` command: run, eval, compare, render, validate, bench."""
 
 from __future__ import annotations
 
 import argparse
 import json
 import sys
+
+import numpy as np
 from pathlib import Path
 from typing import Sequence
 
@@ -14,12 +16,54 @@ EXIT_BAD_INPUT = 2
 
 
 def _validate(args: argparse.Namespace) -> int:
+    from common.curriculum.schema import curriculum_from_mapping, is_curriculum
+    from common.scenario import read_yaml_mapping
     from common.world_file import read_world_file
 
     for path in args.files:
-        scenario = read_world_file(Path(path))
-        print(f"ok: {path}: scenario {scenario.name!r}, {len(scenario.obstacles)} obstacles")
+        data = read_yaml_mapping(path)
+        if is_curriculum(data):
+            config = curriculum_from_mapping(data, path)
+            print(f"ok: {path}: curriculum {config.name!r}, {len(config.stages)} stages")
+        else:
+            scenario = read_world_file(Path(path))
+            print(f"ok: {path}: scenario {scenario.name!r}, {len(scenario.obstacles)} obstacles")
     return 0
+
+
+def _run(args: argparse.Namespace) -> int:
+    from common.curriculum.runner import Runner
+    from common.curriculum.schema import load_curriculum
+
+    config = load_curriculum(args.file)
+    out = Path(args.out) if args.out else Path("runs") / config.name
+    state = Runner(config, out, resume=args.resume, device=args.device, progress=not args.no_progress).run()
+    for name, result in state["stages"].items():
+        final = result["final"]
+        print(f"{name}: {result['timesteps']:,} steps in {result['wall_seconds']:.0f} s; test success "
+              f"{final['success_rate']:.1%} over {final['episodes']} episodes, collisions {final['collision_rate']:.1%}, "
+              f"SPL {final['spl']:.3f}; policy {out / result['policy']}")
+    print(f"report: {out / 'report.md'}")
+    return 0
+
+
+def _eval(args: argparse.Namespace) -> int:
+    from common.evaluation import evaluate
+    from common.report import markdown_table
+
+    agents = _policies(args.policy)
+    summaries = evaluate(agents, _scenarios(args), args.world, seed=args.seed, max_steps=args.max_steps)
+    if args.json:
+        print(json.dumps(summaries[0].to_json() if len(summaries) == 1 else {s.agent: s.to_json() for s in summaries}))
+    else:
+        print(markdown_table(summaries))
+    return 0
+
+
+def _policies(paths):
+    from common.curriculum.policy import load_policy
+
+    return [load_policy(path) for path in paths or []]
 
 
 def _bench(args: argparse.Namespace) -> int:
@@ -41,11 +85,131 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _scenarios(args: argparse.Namespace):
+    """The scenarios a compare/render run uses: a suite's, or a world file's (redrawn per seed)."""
+    from common.generators import get_suite
+    from common.world_file import read_world_file
+
+    if args.scenario_file:
+        return [read_world_file(Path(args.scenario_file), seed=args.seed + i) for i in range(args.episodes)]
+    return list(get_suite(args.suite).scenarios(count=args.episodes, seed=args.seed))
+
+
+def _agents(names: str | None):
+    from common.controllers import CONTROLLERS, make_controller
+
+    chosen = [n.strip() for n in names.split(",") if n.strip()] if names else list(CONTROLLERS)
+    return [make_controller(name, source="--controllers") for name in chosen]
+
+
+def _compare(args: argparse.Namespace) -> int:
+    from rich.progress import Progress
+
+    from common.evaluation import evaluate
+    from common.report import bar_chart, markdown_table, write_csv
+
+    scenarios = _scenarios(args)
+    agents = _agents(args.controllers) + _policies(args.policy)
+    source = Path(args.scenario_file).stem if args.scenario_file else args.suite
+    out = Path(args.out) if args.out else Path("runs") / "compare" / f"{args.world}-{source}"
+    out.mkdir(parents=True, exist_ok=True)
+    with Progress(transient=True, console=_stderr_console()) as bar:
+        task = bar.add_task(f"{source}: {len(agents)} agents x {len(scenarios)} episodes", total=len(agents) * len(scenarios))
+        summaries = evaluate(agents, scenarios, args.world, seed=args.seed, max_steps=args.max_steps,
+                             progress=lambda n: bar.advance(task, n))
+    title = f"{args.world} / {source}: {len(scenarios)} episodes, seed {args.seed}"
+    table = markdown_table(summaries, title)
+    (out / "comparison.md").write_text(table)
+    write_csv(summaries, out / "episodes.csv")
+    bar_chart(summaries, out / "comparison.png", title)
+    if args.json:
+        print(json.dumps({s.agent: s.to_json() for s in summaries}))
+    else:
+        print(table)
+        print(f"written: {out}/comparison.md, episodes.csv, comparison.png")
+    return 0
+
+
+def _render(args: argparse.Namespace) -> int:
+    from common.evaluation import run_episode
+    from flatland.render import Renderer, plot_odometry_drift, save_gif
+
+    args.episodes = args.index + 1
+    scenario = _scenarios(args)[args.index]
+    if args.encoder_noise is not None:
+        scenario = scenario.model_copy(update={"robot": scenario.robot.model_copy(update={"encoder_noise": args.encoder_noise})})
+    (agent,) = _agents(args.agent)
+    renderer = Renderer(scenario)
+    frames, true_path, estimate = [], [], []
+
+    def record(readings) -> None:
+        true_path.append(readings.pose[:2])
+        estimate.append(readings.odometry.pose[:2])
+        if len(true_path) % args.every == 1 or args.every == 1:
+            renderer.draw(readings, true_path, caption=f"{agent.name}  t = {readings.time:.1f} s")
+            frames.append(renderer.frame())
+
+    episode = run_episode(agent, scenario, args.world, seed=args.seed, max_steps=args.max_steps, on_step=record)
+    gif = save_gif(frames, args.out, fps=10 / args.every)
+    print(f"{gif}: {agent.name} on {scenario.name}: {episode.outcome} after {episode.steps} steps, "
+          f"{episode.path_length:.2f} m")
+    if args.drift:
+        plot_odometry_drift(scenario, true_path, estimate, args.drift)
+        error = float(np.hypot(*(np.asarray(true_path[-1]) - np.asarray(estimate[-1]))))
+        print(f"{args.drift}: odometry drift {error:.3f} m after {episode.path_length:.2f} m "
+              f"(encoder noise {scenario.robot.encoder_noise})")
+    return 0
+
+
+def _stderr_console():
+    from rich.console import Console
+
+    return Console(stderr=True)
+
+
+def _add_scenario_source(parser: argparse.ArgumentParser, episodes: int) -> None:
+    from common.generators import SUITES
+    from common.tiers import TIERS
+
+    parser.add_argument("--world", default="flatland", choices=TIERS, help="the tier (default flatland)")
+    source = parser.add_mutually_exclusive_group()
+    source.add_argument("--suite", default="sparse", choices=sorted(SUITES), help="a named suite (default sparse)")
+    source.add_argument("--scenario-file", metavar="FILE", help="a scenario or IR-SIM world YAML")
+    parser.add_argument("--episodes", type=_positive_int, default=episodes, help=f"episodes (default {episodes})")
+    parser.add_argument("--seed", type=int, default=0, help="shifts the suite's base seed and the noise seeds")
+    parser.add_argument("--max-steps", type=_positive_int, default=500, help="steps before a timeout (default 500)")
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="curriculum", description="Differential-drive navigation curricula, 2D to 3D.")
     commands = parser.add_subparsers(dest="command", required=True)
 
-    validate = commands.add_parser("validate", help="check scenario or IR-SIM world YAML files")
+    run = commands.add_parser("run", help="train a curriculum stage by stage into a run directory")
+    run.add_argument("file", metavar="FILE.yaml")
+    run.add_argument("--out", metavar="DIR", help="run directory (default runs/NAME)")
+    run.add_argument("--resume", action="store_true", help="continue a run from its last checkpoint")
+    run.add_argument("--device", choices=["auto", "cpu", "cuda", "mps"], help="overrides the curriculum's device")
+    run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    run.set_defaults(handler=_run)
+
+    evaluate = commands.add_parser("eval", help="evaluate trained policies on a suite or a scenario file")
+    evaluate.add_argument("--policy", nargs="+", required=True, metavar="ZIP")
+    _add_scenario_source(evaluate, episodes=100)
+    evaluate.add_argument("--json", action="store_true",
+                          help="print {success_rate, collision_rate, timeout_rate, spl, mean_steps, mean_path_length, episodes}")
+    evaluate.set_defaults(handler=_eval)
+
+    validate = commands.add_parser("validate", help="check curriculum, scenario or IR-SIM world YAML files")
     validate.add_argument("files", nargs="+", metavar="FILE")
     validate.set_defaults(handler=_validate)
 
@@ -53,6 +217,24 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--json", action="store_true", help="print one JSON object")
     bench.add_argument("--steps", type=int, default=20_000, help="flatland steps to time (IR-SIM runs a tenth)")
     bench.set_defaults(handler=_bench)
+
+    compare = commands.add_parser("compare", help="run agents on the same scenarios; Markdown, CSV, PNG and JSON")
+    _add_scenario_source(compare, episodes=20)
+    compare.add_argument("--controllers", metavar="A,B,...", help="controllers to compare (default: all)")
+    compare.add_argument("--policy", nargs="*", metavar="ZIP", help="trained policies to add as rows")
+    compare.add_argument("--out", metavar="DIR", help="output directory (default runs/compare/WORLD-SOURCE)")
+    compare.add_argument("--json", action="store_true", help="print {agent: {success_rate, ...}} as JSON")
+    compare.set_defaults(handler=_compare)
+
+    render = commands.add_parser("render", help="record one episode of an agent as a GIF (and an odometry-drift plot)")
+    _add_scenario_source(render, episodes=1)
+    render.add_argument("--index", type=int, default=0, help="which scenario of the suite or file draw (default 0)")
+    render.add_argument("--agent", default="pid_blend", help="the controller to drive (default pid_blend)")
+    render.add_argument("--out", default="episode.gif", help="the GIF to write (default episode.gif)")
+    render.add_argument("--every", type=_positive_int, default=1, help="keep every k-th frame (default 1)")
+    render.add_argument("--drift", metavar="PNG", help="also plot the true path against wheel odometry")
+    render.add_argument("--encoder-noise", type=float, help="relative encoder noise for the episode (e.g. 0.02)")
+    render.set_defaults(handler=_render)
     return parser
 
 

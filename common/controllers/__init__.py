@@ -20,20 +20,22 @@ from typing import Any
 
 from common.controllers.base import Controller, LidarGeometry
 from common.controllers.go_to_goal import GoToGoal
+from common.controllers.path_follower import AStarPursuit, PathFollower, RrtPursuit
 from common.controllers.pid_blend import PidHeadingBlend
 from common.controllers.potential_field import PotentialField
 from common.controllers.reactive import ReactiveAvoidance
 from common.errors import ConfigError
 
-__all__ = ["CONTROLLERS", "Controller", "GoToGoal", "LidarGeometry", "PidHeadingBlend", "PotentialField",
+__all__ = ["AStarPursuit", "CONTROLLERS", "Controller", "GoToGoal", "PathFollower", "RrtPursuit", "LidarGeometry", "PidHeadingBlend", "PotentialField",
            "ReactiveAvoidance", "controller_parameters", "make_controller"]
 
-# Path followers (e.g. "astar_pursuit", "rrt_pursuit") register here too.
 CONTROLLERS: dict[str, type[Controller]] = {
     "go_to_goal": GoToGoal,
     "reactive": ReactiveAvoidance,
     "potential_field": PotentialField,
     "pid_blend": PidHeadingBlend,
+    "astar_pursuit": AStarPursuit,
+    "rrt_pursuit": RrtPursuit,
 }
 
 

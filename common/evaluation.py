@@ -1,0 +1,201 @@
+"""Evaluate any agent (controller, planner + follower, policy) on scenarios in a tier.
+
+Per episode: outcome (success, collision, timeout, stuck), steps, path length, wall time and SPL
+(Anderson et al. 2018: success x shortest / max(shortest, taken)); the shortest path is A* on the
+scenario's ground-truth grid, less the goal radius, since an episode ends on entering it.
+Aggregates carry mean ± std and 95% Wilson intervals for the rates.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Callable, Iterable, Protocol, Sequence
+
+import numpy as np
+from scipy import stats
+
+from common.readings import Readings
+from common.scenario import LidarSpec, RobotProfile, Scenario
+from common.tiers import make_world
+
+OUTCOMES = ("success", "collision", "timeout", "stuck")
+DEFAULT_MAX_STEPS = 500
+STUCK_WINDOW = 100  # steps
+STUCK_DISTANCE = 0.1  # m: an agent that moved less than this over the window is stuck
+
+
+class Agent(Protocol):
+    """What the evaluator drives: the controller interface (policies are wrapped to it)."""
+
+    name: str
+
+    def bind(self, robot: RobotProfile, lidar: LidarSpec) -> None: ...
+
+    def reset(self) -> None: ...
+
+    def act(self, readings: Readings, goal: tuple[float, float]) -> tuple[float, float]: ...
+
+
+@dataclass(frozen=True)
+class Episode:
+    """One evaluated episode."""
+
+    agent: str
+    scenario: str
+    seed: int
+    outcome: str
+    steps: int
+    path_length: float
+    shortest_path: float
+    spl: float
+    wall_time: float
+
+
+def shortest_path_length(scenario: Scenario, resolution: float = 0.1) -> float:
+    """Length of the A* path on the ground-truth grid (inflated by the robot's radius), less the goal
+    radius. Where the inflated grid blocks the start or the goal (a hand-made file may put either
+    near an obstacle), the straight-line distance stands in: a lower bound, so SPL errs low."""
+    from common.occupancy import scenario_grid
+    from common.planners.astar import AStar, path_length
+
+    grid = scenario_grid(scenario, resolution)
+    path = AStar().plan(grid, scenario.start[:2], scenario.goal)
+    length = path_length(path) if path is not None else math.dist(scenario.start[:2], scenario.goal)
+    return max(length - scenario.goal_threshold, 0.0)
+
+
+def run_episode(
+    agent: Agent,
+    scenario: Scenario,
+    tier: str = "flatland",
+    seed: int = 0,
+    max_steps: int = DEFAULT_MAX_STEPS,
+    on_step: Callable[[Readings], None] | None = None,
+    shortest: float | None = None,
+) -> Episode:
+    """Drive ``agent`` in a fresh world of ``scenario``; ``on_step`` sees every readings (e.g. to render)."""
+    world = make_world(tier, scenario, seed=seed)
+    readings = world.reset(seed=seed)
+    agent.bind(scenario.robot, scenario.lidar)
+    agent.reset()
+    if on_step:
+        on_step(readings)
+    gx, gy = scenario.goal
+    travelled = 0.0
+    recent = [travelled]
+    outcome, steps = "timeout", 0
+    start = time.perf_counter()
+    while steps < max_steps:
+        v, w = agent.act(readings, scenario.goal)
+        previous = readings.pose
+        readings = world.step(v, w)
+        steps += 1
+        travelled += math.hypot(readings.pose[0] - previous[0], readings.pose[1] - previous[1])
+        if on_step:
+            on_step(readings)
+        if math.hypot(gx - readings.pose[0], gy - readings.pose[1]) < scenario.goal_threshold:
+            outcome = "success"
+            break
+        if readings.collided:
+            outcome = "collision"
+            break
+        recent.append(travelled)
+        if len(recent) > STUCK_WINDOW and recent[-1] - recent[-1 - STUCK_WINDOW] < STUCK_DISTANCE:
+            outcome = "stuck"
+            break
+    wall = time.perf_counter() - start
+    shortest = shortest_path_length(scenario) if shortest is None else shortest
+    spl = shortest / max(shortest, travelled) if outcome == "success" and shortest > 0 else float(outcome == "success")
+    return Episode(agent.name, scenario.name, seed, outcome, steps, travelled, shortest, spl, wall)
+
+
+def wilson_interval(successes: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
+    """The Wilson score interval of a binomial rate (sound near 0 and 1, unlike the normal one)."""
+    if n == 0:
+        return (math.nan, math.nan)
+    z = stats.norm.ppf(0.5 + confidence / 2)
+    p = successes / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return (max(0.0, centre - half), min(1.0, centre + half))
+
+
+@dataclass
+class Summary:
+    """Aggregates of one agent's episodes. Steps and path length are over successful episodes."""
+
+    agent: str
+    episodes: int
+    success_rate: float
+    collision_rate: float
+    timeout_rate: float
+    stuck_rate: float
+    success_ci95: tuple[float, float]
+    spl: float
+    spl_std: float
+    mean_steps: float | None
+    std_steps: float | None
+    mean_path_length: float | None
+    std_path_length: float | None
+    mean_wall_time: float
+    rows: list[Episode] = field(default_factory=list, repr=False)
+
+    def to_json(self) -> dict:
+        """The agreed JSON object (plus stuck rate and the interval)."""
+        keys = ("success_rate", "collision_rate", "timeout_rate", "stuck_rate", "spl", "mean_steps",
+                "mean_path_length", "episodes", "success_ci95")
+        out = {key: getattr(self, key) for key in keys}
+        out["success_ci95"] = list(self.success_ci95)
+        return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in out.items()}
+
+
+def _mean_std(values: Sequence[float]) -> tuple[float | None, float | None]:
+    if not values:
+        return None, None
+    return float(np.mean(values)), float(np.std(values))
+
+
+def summarise(agent: str, episodes: Sequence[Episode]) -> Summary:
+    """Aggregate episodes of one agent."""
+    n = len(episodes)
+    count = {o: sum(e.outcome == o for e in episodes) for o in OUTCOMES}
+    wins = [e for e in episodes if e.outcome == "success"]
+    spl = [e.spl for e in episodes]
+    steps = _mean_std([e.steps for e in wins])
+    length = _mean_std([e.path_length for e in wins])
+    return Summary(
+        agent=agent, episodes=n,
+        success_rate=count["success"] / n, collision_rate=count["collision"] / n,
+        timeout_rate=count["timeout"] / n, stuck_rate=count["stuck"] / n,
+        success_ci95=wilson_interval(count["success"], n),
+        spl=float(np.mean(spl)), spl_std=float(np.std(spl)),
+        mean_steps=steps[0], std_steps=steps[1], mean_path_length=length[0], std_path_length=length[1],
+        mean_wall_time=float(np.mean([e.wall_time for e in episodes])), rows=list(episodes),
+    )
+
+
+def evaluate(
+    agents: Sequence[Agent],
+    scenarios: Iterable[Scenario],
+    tier: str = "flatland",
+    seed: int = 0,
+    max_steps: int = DEFAULT_MAX_STEPS,
+    progress: Callable[[int], None] | None = None,
+) -> list[Summary]:
+    """Every agent on the same scenarios with the same seeds (episode i uses ``seed + i``)."""
+    scenarios = list(scenarios)
+    shortest = [shortest_path_length(s) for s in scenarios]
+    results: dict[str, list[Episode]] = {a.name: [] for a in agents}
+    for agent in agents:
+        for i, (scenario, best) in enumerate(zip(scenarios, shortest)):
+            results[agent.name].append(run_episode(agent, scenario, tier, seed + i, max_steps, shortest=best))
+            if progress:
+                progress(1)
+    return [summarise(name, rows) for name, rows in results.items()]
+
+
+def episodes_as_dicts(summaries: Sequence[Summary]) -> list[dict]:
+    """All episodes of all summaries as flat dicts (for CSV)."""
+    return [asdict(e) for s in summaries for e in s.rows]

@@ -1,0 +1,97 @@
+"""Episode outcomes, SPL on toy cases, Wilson intervals, aggregation and report files."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from common.evaluation import Episode, evaluate, run_episode, shortest_path_length, summarise, wilson_interval
+from common.kinematics import wrap_angle
+from common.report import bar_chart, markdown_table, write_csv
+from common.scenario import CircleObstacle, Scenario
+
+
+class Scripted:
+    """A toy agent: steer to the goal at a fixed speed, or follow a fixed (v, w)."""
+
+    def __init__(self, name: str, command: tuple[float, float] | None = None, via: tuple[float, float] | None = None):
+        self.name, self.command, self.via = name, command, via
+
+    def bind(self, robot, lidar) -> None:
+        pass
+
+    def reset(self) -> None:
+        self.passed_via = self.via is None
+
+    def act(self, readings, goal):
+        if self.command is not None:
+            return self.command
+        x, y, yaw = readings.odometry.pose
+        target = goal if self.passed_via else self.via
+        if not self.passed_via and math.hypot(target[0] - x, target[1] - y) < 0.1:
+            self.passed_via, target = True, goal
+        error = wrap_angle(math.atan2(target[1] - y, target[0] - x) - yaw)
+        return (0.0 if abs(error) > 0.3 else 0.5), max(-1.0, min(1.0, 3.0 * error))
+
+
+OPEN = Scenario(start=(1.0, 5.0, 0.0), goal=(7.0, 5.0), goal_threshold=0.3)
+
+
+def test_straight_drive_to_the_goal_has_spl_near_one():
+    episode = run_episode(Scripted("direct"), OPEN)
+    assert episode.outcome == "success"
+    assert episode.shortest_path == pytest.approx(6.0 - 0.3, abs=0.05)
+    assert episode.spl == pytest.approx(1.0, abs=0.03)
+
+
+def test_a_detour_halves_spl_roughly_by_its_extra_length():
+    episode = run_episode(Scripted("detour", via=(4.0, 9.0)), OPEN, max_steps=2000)
+    assert episode.outcome == "success"
+    expected = episode.shortest_path / episode.path_length
+    assert episode.spl == pytest.approx(expected)
+    assert 0.5 < episode.spl < 0.75  # 5 + ~4.6 m against 5.7 m
+
+
+def test_outcomes_collision_stuck_timeout():
+    blocked = OPEN.model_copy(update={"obstacles": [CircleObstacle(x=4.0, y=5.0, radius=0.5)]})
+    assert run_episode(Scripted("ram", (0.5, 0.0)), blocked).outcome == "collision"
+    assert run_episode(Scripted("idle", (0.0, 0.0)), OPEN).outcome == "stuck"
+    circling = run_episode(Scripted("circle", (0.5, 1.0)), OPEN, max_steps=50)
+    assert circling.outcome == "timeout" and circling.steps == 50
+    assert run_episode(Scripted("ram", (0.5, 0.0)), blocked).spl == 0.0
+
+
+def test_shortest_path_goes_around_obstacles():
+    wall = OPEN.model_copy(update={"obstacles": [CircleObstacle(x=4.0, y=5.0, radius=1.5)]})
+    assert shortest_path_length(wall) > shortest_path_length(OPEN) + 0.5
+
+
+def test_wilson_interval_known_values():
+    lo, hi = wilson_interval(10, 20)
+    assert lo == pytest.approx(0.2993, abs=1e-3) and hi == pytest.approx(0.7007, abs=1e-3)
+    assert wilson_interval(20, 20)[1] == 1.0 and wilson_interval(20, 20)[0] == pytest.approx(0.8389, abs=1e-3)
+
+
+def _episode(outcome: str, steps: int = 10, length: float = 1.0, spl: float = 0.0) -> Episode:
+    return Episode("a", "s", 0, outcome, steps, length, 1.0, spl, 0.01)
+
+
+def test_summary_rates_and_success_only_means():
+    rows = [_episode("success", 10, 2.0, 0.8), _episode("success", 20, 4.0, 0.6), _episode("collision", 5),
+            _episode("stuck", 100)]
+    s = summarise("a", rows)
+    assert (s.success_rate, s.collision_rate, s.stuck_rate, s.timeout_rate) == (0.5, 0.25, 0.25, 0.0)
+    assert s.mean_steps == 15 and s.mean_path_length == 3.0 and s.spl == pytest.approx(0.35)
+    assert set(s.to_json()) >= {"success_rate", "collision_rate", "timeout_rate", "spl", "mean_steps",
+                                "mean_path_length", "episodes"}
+
+
+def test_same_scenarios_for_every_agent_and_report_files(tmp_path):
+    summaries = evaluate([Scripted("direct"), Scripted("idle", (0.0, 0.0))], [OPEN, OPEN], max_steps=200)
+    assert [s.agent for s in summaries] == ["direct", "idle"]
+    assert [r.scenario for r in summaries[0].rows] == [r.scenario for r in summaries[1].rows]
+    table = markdown_table(summaries, "toy")
+    assert "| direct | 2 | 100% (" in table and "| idle | 2 | 0% (" in table
+    assert write_csv(summaries, tmp_path / "e.csv").read_text().count("\n") == 5
+    assert bar_chart(summaries, tmp_path / "c.png").stat().st_size > 1000
