@@ -1,0 +1,1 @@
+"""Curricula: the YAML schema, the stage runner, policies with their manifest, resume."""

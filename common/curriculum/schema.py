@@ -1,0 +1,167 @@
+"""The curriculum YAML schema (validated with pydantic; errors are one line: file, field, allowed).
+
+```yaml
+name: stage1_2d
+seed: 0
+device: auto            # auto | cpu | cuda | mps
+stages:
+  - name: sparse
+    world: flatland      # flatland | physics3d
+    scenarios: {kind: sparse, difficulty: 0.5}     # or {suite: NAME} or {file: PATH}
+    observation: lidar43 # nav7 | lidar43
+    reward: tutorial2d   # a preset or {term: weight | {weight, params}}
+    max_steps: 300       # episode length
+    algorithm: ppo       # ppo | sac | td3
+    hyperparams: {learning_rate: 3.0e-4, n_steps: 256}   # stable-baselines3's own argument names
+    n_envs: 8
+    vec_env: dummy       # dummy | subproc
+    normalize: false     # VecNormalize on observations
+    budget: 500000       # environment steps
+    eval: {suite: sparse, episodes: 100, every: 50000}
+    promote: {success_rate: 0.95}   # end the stage early when the evaluation reaches it
+    init_from: null      # null | previous | path/to/policy.zip
+```
+"""
+
+from __future__ import annotations
+
+import inspect
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from common.errors import ConfigError
+from common.generators import KINDS, SUITES
+from common.observations import LAYOUTS
+from common.rewards import resolve_reward_spec
+from common.scenario import pydantic_error, read_yaml_mapping
+from common.tiers import TIERS
+
+ALGORITHMS = ("ppo", "sac", "td3")
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+class ScenarioSpec(_Strict):
+    """Where a stage's training scenarios come from: exactly one of kind, suite or file."""
+
+    kind: Literal[KINDS] | None = None  # type: ignore[valid-type]
+    difficulty: Annotated[float, Field(ge=0.0, le=1.0)] = 0.5
+    suite: str | None = None
+    file: str | None = None
+
+    @model_validator(mode="after")
+    def _exactly_one(self) -> "ScenarioSpec":
+        given = [k for k in ("kind", "suite", "file") if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ValueError(f"give exactly one of kind, suite or file (got {', '.join(given) or 'none'})")
+        if self.suite is not None and self.suite not in SUITES:
+            raise ValueError(f"unknown suite {self.suite!r}; allowed: {', '.join(SUITES)}")
+        return self
+
+
+class EvalSpec(_Strict):
+    """Periodic evaluation on held-out scenarios (the suite's eval split, disjoint from training)."""
+
+    suite: str
+    episodes: Annotated[int, Field(ge=1)] = 100
+    every: Annotated[int, Field(ge=1)] = 50_000
+    final_episodes: Annotated[int, Field(ge=1)] | None = None  # the report's final evaluation (default: episodes)
+
+    @field_validator("suite")
+    @classmethod
+    def _known_suite(cls, value: str) -> str:
+        if value not in SUITES:
+            raise ValueError(f"unknown suite {value!r}; allowed: {', '.join(SUITES)}")
+        return value
+
+
+class PromoteSpec(_Strict):
+    """The stage ends early once an evaluation's success rate reaches this."""
+
+    success_rate: Annotated[float, Field(gt=0.0, le=1.0)] = 0.9
+
+
+class StageSpec(_Strict):
+    """One stage of a curriculum."""
+
+    name: str
+    world: Literal[TIERS] = "flatland"  # type: ignore[valid-type]
+    scenarios: ScenarioSpec
+    observation: Literal[LAYOUTS] = "lidar43"  # type: ignore[valid-type]
+    reward: str | dict[str, Any] = "tutorial2d"
+    max_steps: Annotated[int, Field(ge=1)] = 500
+    algorithm: Literal[ALGORITHMS] = "ppo"  # type: ignore[valid-type]
+    hyperparams: dict[str, Any] = {}
+    n_envs: Annotated[int, Field(ge=1, le=256)] = 8
+    vec_env: Literal["dummy", "subproc"] = "dummy"
+    normalize: bool = False
+    budget: Annotated[int, Field(ge=1)]
+    eval: EvalSpec
+    promote: PromoteSpec | None = None
+    init_from: str | None = None
+
+
+class CurriculumConfig(_Strict):
+    """A curriculum: stages run in order, each optionally continuing from the previous policy."""
+
+    name: str
+    seed: int = 0
+    device: Literal["auto", "cpu", "cuda", "mps"] = "auto"
+    stages: Annotated[list[StageSpec], Field(min_length=1)]
+
+
+def _algorithm_class(name: str):
+    from stable_baselines3 import PPO, SAC, TD3
+
+    return {"ppo": PPO, "sac": SAC, "td3": TD3}[name]
+
+
+_MANAGED = {"policy", "env", "seed", "device", "verbose", "tensorboard_log", "_init_setup_model"}
+
+
+def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
+    """What pydantic cannot know: reward terms, SB3 argument names, init_from order and paths."""
+    field = f"stages.{index}"
+    try:
+        resolve_reward_spec(stage.reward)
+    except ConfigError as error:
+        raise ConfigError(source, f"{field}.{error.field}", error.problem) from None
+    allowed = set(inspect.signature(_algorithm_class(stage.algorithm).__init__).parameters) - _MANAGED - {"self"}
+    for key in stage.hyperparams:
+        if key not in allowed:
+            raise ConfigError(source, f"{field}.hyperparams.{key}",
+                              f"not a {stage.algorithm.upper()} argument; allowed: {', '.join(sorted(allowed))}")
+    if stage.init_from == "previous" and index == 0:
+        raise ConfigError(source, f"{field}.init_from", "the first stage has no previous stage; allowed: null or a policy path")
+    if stage.init_from not in (None, "previous") and not Path(stage.init_from).is_file():
+        raise ConfigError(source, f"{field}.init_from", f"no policy file {stage.init_from!r}; allowed: null, previous or a .zip path")
+    if stage.scenarios.file is not None and not Path(stage.scenarios.file).is_file():
+        raise ConfigError(source, f"{field}.scenarios.file", f"no such file {stage.scenarios.file!r}")
+
+
+def curriculum_from_mapping(data: dict, source: str | Path | None = None) -> CurriculumConfig:
+    """Validate a parsed curriculum mapping."""
+    try:
+        config = CurriculumConfig.model_validate(data)
+    except ValidationError as exc:
+        raise pydantic_error(source, exc) from None
+    for index, stage in enumerate(config.stages):
+        _check_stage(stage, index, source)
+    names = [stage.name for stage in config.stages]
+    if len(set(names)) != len(names):
+        raise ConfigError(source, "stages", f"stage names must be unique, got {names}")
+    return config
+
+
+def load_curriculum(path: str | Path) -> CurriculumConfig:
+    """Read and validate a curriculum YAML file."""
+    return curriculum_from_mapping(read_yaml_mapping(path), path)
+
+
+def is_curriculum(data: dict) -> bool:
+    """Whether a parsed YAML mapping is a curriculum (rather than a world file)."""
+    return "stages" in data
