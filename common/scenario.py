@@ -160,7 +160,10 @@ class LidarSpec(_Frozen):
         return self
 
     def beam_angles(self) -> np.ndarray:
-        """Beam directions relative to the sensor heading, in scan order (IR-SIM's convention)."""
+        """Beam directions relative to the sensor heading, in scan order (IR-SIM's convention:
+        both ends of the range included; a single beam looks straight ahead)."""
+        if self.beams == 1:
+            return np.zeros(1)
         return np.linspace(-0.5 * self.angle_range, 0.5 * self.angle_range, self.beams)
 
 

@@ -145,7 +145,8 @@ class World:
         self.velocity = (0.0, 0.0)
         self.steps = 0
         self.odometry.reset(self.pose)
-        self.stopped = self.overlaps(self.pose)
+        # As in IR-SIM, contact is judged after a move: a start that overlaps may still drive out.
+        self.stopped = False
         self.readings = self._read(0.0)
         return self.readings
 
@@ -194,9 +195,13 @@ class World:
         along = lambda f: Pose2D(start[0] + f * (end[0] - start[0]), start[1] + f * (end[1] - start[1]),
                                  wrap_angle(start[2] + f * turn))
         if self.scenario.robot.shape == "circle":
-            # The swept circle is the footprint: the earliest alpha is the first contact.
-            hits = [hit.alpha for hit in (shape.segment_query(start[:2], end[:2], r) for shape in candidates) if hit]
+            # The swept circle is the footprint: the earliest alpha is the first contact. A contact at
+            # alpha 0 is an overlap the robot started in and is leaving (the end pose is clear).
+            hits = [hit.alpha for hit in (shape.segment_query(start[:2], end[:2], r) for shape in candidates)
+                    if hit and hit.alpha > 0.0]
             return (along(min(hits)), True) if hits else (end, False)
+        if self.overlaps(start):
+            return end, False  # leaving an overlap: judge by the end pose alone, as IR-SIM does
         # The swept bounding circle only says a box footprint may touch: search the path finely.
         substeps = max(1, math.ceil(math.hypot(end[0] - start[0], end[1] - start[1]) / _BOX_SEARCH_STEP))
         for k in range(1, substeps):

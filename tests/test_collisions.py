@@ -84,10 +84,16 @@ def test_head_on_circle_stops_at_the_touching_pose_and_stays():
     assert world.readings.pose == world.scenario.start_pose
 
 
-def test_starting_in_contact_is_a_collision():
-    world = make_world([CircleObstacle(x=1.5, y=5.0, radius=0.5)])
-    assert world.readings.collided
-    assert world.step(1.0, 0.0).pose == world.scenario.start_pose
+def test_starting_in_contact_is_judged_after_the_first_move_as_in_irsim():
+    """The start (1, 5) overlaps a circle at (1.62, 5) by 0.08 m; IR-SIM judges contact after a move."""
+    circle = CircleObstacle(x=1.62, y=5.0, radius=0.5)
+    facing = make_world([circle])
+    assert not facing.readings.collided
+    into = facing.step(1.0, 0.0)
+    assert into.collided and into.pose.x == pytest.approx(1.1)
+    away = make_world([circle], start=(1.0, 5.0, math.pi))
+    out = away.step(1.0, 0.0)
+    assert not out.collided and out.pose.x == pytest.approx(0.9)
 
 
 @pytest.mark.parametrize("clearance, collides", [(0.01, False), (-0.01, True)])

@@ -1,0 +1,706 @@
+"""Read an IR-SIM world YAML (the 2.x schema) as a project :class:`Scenario`.
+
+The goal is parity with IR-SIM's ``stop`` collision mode: the same start, limits, lidar and
+obstacle geometry, so that ``flatland`` reproduces IR-SIM's poses and scans. Facts about IR-SIM
+(defaults, key names, fan-out and random placement) follow IR-SIM 2.12.
+
+Mapping, and where it deliberately differs from IR-SIM:
+
+* The first robot (after expanding ``number``) is the controlled one and must use
+  ``kinematics: {name: diff}``. Further robots, and every obstacle, become static obstacles at
+  their initial state: behaviours, kinematics and initial velocities of other objects are ignored.
+* IR-SIM builds circles as 64-gons (a buffered point), and so do we for obstacles, vertex for
+  vertex, so lidar ranges match to rounding. The controlled robot stays a true circle: its contact
+  distance differs from IR-SIM's 64-gon by at most ``r * (1 - cos(pi / 64))``, about 0.12 % of r.
+* Without a lidar2d sensor the scenario still gets a lidar with IR-SIM's lidar2d defaults,
+  because every project scenario carries one.
+* Random placement (``distribution: random``) and random shapes use ``np.random.default_rng(seed)``
+  with IR-SIM's draw order (robot groups, then obstacle groups; per group states, goals, then each
+  object's shape), so the result equals ``irsim.make(path, seed=seed)`` unless a ``wander``
+  behaviour draws from the same generator first.
+* Keys IR-SIM knows but a static stop-mode world does not need (colours, plots, behaviours,
+  contact-mode physics, ...) are accepted and ignored; unknown keys and values that would change
+  the controlled robot's motion in a way flatland cannot model are a :class:`ConfigError`.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+from pydantic import BaseModel, ValidationError
+
+from common.errors import ConfigError
+from common.scenario import (
+    BoxObstacle,
+    LidarSpec,
+    PolygonObstacle,
+    RobotProfile,
+    Scenario,
+    SegmentObstacle,
+    WorldSpec,
+    pydantic_error,
+)
+
+TOP_KEYS = ("world", "robot", "obstacle", "gui", "custom")
+WORLD_KEYS = (
+    "name", "height", "width", "step_time", "sample_time", "offset", "step_mode", "control_mode",
+    "collision_mode", "gravity", "friction", "restitution", "drive_tau", "obstacle_map", "mdownsample",
+    "fog_map", "fog_map_resolution", "plot", "status",
+)
+OBJECT_KEYS = (
+    "shape", "kinematics", "state", "velocity", "goal", "role", "color", "static", "mass", "friction",
+    "inertia", "restitution", "vel_min", "vel_max", "acce", "angle_range", "behavior", "group_behavior",
+    "goal_threshold", "sensors", "arrive_mode", "description", "group", "group_name", "state_dim",
+    "vel_dim", "unobstructed", "fov", "fov_radius", "name", "plot", "number", "distribution",
+)
+KINEMATICS_NAMES = ("diff", "omni", "omni_angular", "acker", "static")
+KINEMATICS_KEYS = ("name", "noise", "alpha", "tau", "mode", "wheelbase")
+DIFF_KINEMATICS_KEYS = ("name", "noise", "alpha", "tau")
+SENSOR_TYPES = ("lidar2d", "fmcw_lidar2d", "contact2d")
+LIDAR_KEYS = (
+    "name", "type", "range_min", "range_max", "angle_range", "number", "scan_time", "noise", "std",
+    "angle_std", "offset", "alpha", "has_velocity", "color", "plot",
+)
+_RANDOM_POLYGON_KEYS = (
+    "random_shape", "is_convex", "center_range", "avg_radius_range", "irregularity_range",
+    "spikeyness_range", "num_vertices_range",
+)
+SHAPE_KEYS = {
+    "circle": ("name", "radius", "center", "random_shape", "radius_range", "wheelbase"),
+    "rectangle": ("name", "length", "width", "wheelbase"),
+    "polygon": ("name", "vertices", *_RANDOM_POLYGON_KEYS),
+    "linestring": ("name", "vertices", *_RANDOM_POLYGON_KEYS),
+}
+OBSTACLE_SHAPES = ("circle", "rectangle", "polygon", "linestring")
+ROBOT_SHAPES = ("circle", "rectangle")  # the footprints RobotProfile can express
+DISTRIBUTION_KEYS = ("name", "range_low", "range_high", "min_distance", "radius", "center", "3d")
+MAX_OBJECTS, MAX_VERTICES, MAX_BEAMS = 1000, 1000, 4096  # sanity caps (IR-SIM has none)
+CIRCLE_SEGMENTS = 64  # shapely's Point.buffer default: 16 segments per quarter circle
+_MARGIN = 0.5  # IR-SIM keeps default random and circle placements this far inside the world
+
+
+class _Value(NamedTuple):
+    """A YAML value and the field path that names it in error messages."""
+
+    value: Any
+    path: str
+
+
+class _Shape(NamedTuple):
+    """A body-frame outline: ``circle`` (points = [centre], radius), ``rectangle`` (points =
+    [centre], length, width), ``polygon`` or ``linestring`` (points = vertices)."""
+
+    kind: str
+    points: np.ndarray
+    radius: float = 0.0
+    length: float = 0.0
+    width: float = 0.0
+
+
+Entry = dict[str, _Value]  # one object's keys after IR-SIM's per-object fan-out
+
+
+def _fail(path: str | None, problem: str) -> ConfigError:
+    # Raised without a source; parse_irsim attributes every error to the file at the end.
+    return ConfigError(None, path, problem)
+
+
+def _join(path: str, key: str) -> str:
+    return f"{path}.{key}" if path else key
+
+
+# -- scalar and vector checks ------------------------------------------------------------------
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
+def _number(value: Any, path: str, low: float | None = None, strict: bool = False, allow_inf: bool = False) -> float:
+    """A real number, finite unless ``allow_inf``, optionally bounded below (``strict``: exclusive)."""
+    if not _is_number(value) or math.isnan(value):
+        raise _fail(path, f"expected a number (got {value!r})")
+    value = float(value)
+    if math.isinf(value) and not allow_inf:
+        raise _fail(path, f"expected a finite number (got {value!r})")
+    if low is not None and (value <= low if strict else value < low):
+        raise _fail(path, f"must be {'>' if strict else '>='} {low:g} (got {value:g})")
+    return value
+
+
+def _integer(value: Any, path: str, low: int, high: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise _fail(path, f"expected an integer (got {value!r})")
+    if not low <= value <= high:
+        raise _fail(path, f"must be >= {low} and <= {high} (got {value})")
+    return int(value)
+
+
+def _flag(value: Any, path: str) -> bool:
+    if not isinstance(value, bool):
+        raise _fail(path, f"expected true or false (got {value!r})")
+    return value
+
+
+def _text(value: Any, path: str, allowed: tuple[str, ...] | None = None) -> str:
+    if not isinstance(value, str):
+        raise _fail(path, f"expected a string (got {value!r})")
+    if allowed is not None and value not in allowed:
+        raise _fail(path, f"unsupported value {value!r}; allowed: {', '.join(allowed)}")
+    return value
+
+
+def _vector(value: Any, path: str, size: int | None = None, min_size: int = 0, allow_inf: bool = False) -> list[float]:
+    """A list of numbers, of exactly ``size`` entries or at least ``min_size``."""
+    wanted = f"{size} numbers" if size is not None else f"at least {min_size} numbers" if min_size else "numbers"
+    if not isinstance(value, (list, tuple)) or (size is not None and len(value) != size) or len(value) < min_size:
+        raise _fail(path, f"expected a list of {wanted} (got {value!r})")
+    return [_number(v, f"{path}[{i}]", allow_inf=allow_inf) for i, v in enumerate(value)]
+
+
+def _bounds(low: list[float], high: list[float], path: str) -> None:
+    """Random draws need finite bounds with low <= high in every component."""
+    for i, (a, b) in enumerate(zip(low, high)):
+        if not (math.isfinite(a) and math.isfinite(b)) or a > b:
+            raise _fail(path, f"component {i}: expected finite bounds with low <= high (got {a:g}, {b:g})")
+
+
+def _points(value: Any, path: str, min_count: int) -> np.ndarray:
+    """A list of at least ``min_count`` [x, y] points, as an (N, 2) array."""
+    if not isinstance(value, (list, tuple)) or len(value) < min_count:
+        raise _fail(path, f"expected a list of at least {min_count} [x, y] points (got {value!r})")
+    return np.array([_vector(p, f"{path}[{i}]", size=2) for i, p in enumerate(value)], dtype=float)
+
+
+def _mapping(value: Any, path: str) -> dict:
+    if not isinstance(value, dict):
+        raise _fail(path, f"expected a mapping (got {value!r})")
+    return value
+
+
+def _check_keys(mapping: dict, allowed: tuple[str, ...], path: str) -> None:
+    for key in mapping:
+        if key not in allowed:
+            raise _fail(_join(path, str(key)), f"unknown key; allowed: {', '.join(allowed)}")
+
+
+def _fit3(values: list[float]) -> tuple[float, float, float]:
+    """IR-SIM's state fitting: zero-padded or truncated to x, y, theta."""
+    x, y, theta = (list(values) + [0.0, 0.0, 0.0])[:3]
+    return x, y, theta
+
+
+def _build(model: type[BaseModel], path: str, fields: dict[str, _Value]) -> Any:
+    """Validate a model; a pydantic error names the IR-SIM field it came from."""
+    try:
+        return model(**{name: item.value for name, item in fields.items()})
+    except ValidationError as exc:
+        error = pydantic_error(None, exc)
+        field = fields[error.field].path if error.field in fields else path
+        raise _fail(field, error.problem) from None
+
+
+# -- world ---------------------------------------------------------------------------------------
+
+
+def _world(value: Any, path: str) -> tuple[WorldSpec, str | None]:
+    """The world block as a WorldSpec (no walls, Euler steps) and its name, if given."""
+    world = _mapping({} if value is None else value, path)
+    _check_keys(world, WORLD_KEYS, path)
+    at = lambda key: _join(path, key)  # noqa: E731
+    fields = {
+        "width": _Value(_number(world.get("width", 10), at("width"), 0, strict=True), at("width")),
+        "height": _Value(_number(world.get("height", 10), at("height"), 0, strict=True), at("height")),
+        "offset": _Value(tuple(_vector(world.get("offset", [0, 0]), at("offset"), size=2)), at("offset")),
+        "step_time": _Value(_number(world.get("step_time", 0.1), at("step_time"), 0, strict=True), at("step_time")),
+        "walls": _Value(False, path),  # IR-SIM's world rectangle only frames the plot
+        "integrator": _Value("euler", path),
+    }
+    if world.get("sample_time") is not None:
+        _number(world["sample_time"], at("sample_time"), 0, strict=True)
+    _text(world.get("collision_mode", "stop"), at("collision_mode"), ("stop",))
+    _text(world.get("step_mode", "internal"), at("step_mode"), ("internal", "external"))
+    _text(world.get("control_mode", "auto"), at("control_mode"), ("auto", "keyboard"))
+    if world.get("obstacle_map") is not None:
+        raise _fail(at("obstacle_map"), "obstacle maps are not supported; allowed: null (use obstacle shapes)")
+    name = world.get("name")
+    if name is not None:
+        _text(name, at("name"))
+    return _build(WorldSpec, path, fields), name
+
+
+# -- objects: fan-out and placement --------------------------------------------------------------
+
+
+def _groups(value: Any, path: str) -> list[tuple[dict, str]]:
+    """A robot or obstacle block (a mapping or a list of mappings) as (group, path) pairs."""
+    if value is None:
+        return []
+    if isinstance(value, dict):
+        return [(value, path)]
+    if not isinstance(value, list):
+        raise _fail(path, f"expected a mapping or a list of mappings (got {value!r})")
+    return [(_mapping(group, f"{path}[{i}]"), f"{path}[{i}]") for i, group in enumerate(value)]
+
+
+def _fan_out(value: Any, number: int, path: str) -> list[_Value]:
+    """IR-SIM's per-object spread: a scalar, mapping or number list is shared; any other list holds
+    one entry per object, padded with its last entry or truncated."""
+    if number == 0:
+        return []
+    # A list holding any number is a (possibly malformed) vector, so validation names its bad entry.
+    if not isinstance(value, list) or not value or any(isinstance(v, numbers.Real) for v in value):
+        return [_Value(value, path)] * number
+    items = [_Value(v, f"{path}[{i}]") for i, v in enumerate(value[:number])]
+    return items + [items[-1]] * (number - len(items))
+
+
+def _sensor_fan_out(value: Any, number: int, path: str) -> list[_Value]:
+    """Sensors are shared when given as a list of mappings, else one list per object."""
+    if not isinstance(value, list) or all(isinstance(v, dict) for v in value):
+        return [_Value(value, path)] * number
+    return _fan_out(value, number, path)
+
+
+def _random_points(rng: np.random.Generator, low: list[float], high: list[float], number: int,
+                   min_distance: float) -> list[list[float]]:
+    """IR-SIM's rejection sampling: up to 1000 draws per point for an xy spacing of ``min_distance``;
+    when all fail the last draw is kept."""
+    tries = 1000
+    points = np.zeros((number, 3))
+    for i in range(number):
+        # All tries are drawn at once, then the generator is rewound and advanced by exactly the
+        # draws IR-SIM's one-at-a-time loop would have made, so the random stream stays identical.
+        saved = rng.bit_generator.state
+        candidates = rng.uniform(low[:3], high[:3], size=(tries, 3))
+        chosen = 0 if i == 0 else tries - 1
+        for start in range(0, tries if i > 0 else 0, 50):
+            chunk = candidates[start:start + 50]
+            gaps = np.hypot(chunk[:, None, 0] - points[None, :i, 0], chunk[:, None, 1] - points[None, :i, 1])
+            accepted = np.flatnonzero(gaps.min(axis=1) >= min_distance)
+            if accepted.size:
+                chosen = start + int(accepted[0])
+                break
+        rng.bit_generator.state = saved
+        rng.uniform(low[:3], high[:3], size=(chosen + 1, 3))
+        points[i] = candidates[chosen]
+    return points.tolist()
+
+
+def _placements(group: dict, number: int, path: str, rng: np.random.Generator,
+                world: WorldSpec) -> tuple[list[_Value], list[_Value]]:
+    """States and goals of a group's objects, by its ``distribution``."""
+    dist_path = _join(path, "distribution")
+    distribution = _mapping(group.get("distribution") or {"name": "manual"}, dist_path)
+    _check_keys(distribution, DISTRIBUTION_KEYS, dist_path)
+    if "name" not in distribution:
+        raise _fail(_join(dist_path, "name"), "missing; allowed: manual, random, circle")
+    name = _text(distribution["name"], _join(dist_path, "name"), ("manual", "random", "circle"))
+    if distribution.get("3d"):
+        raise _fail(_join(dist_path, "3d"), "3D placement is not supported (IR-SIM neither); allowed: false")
+    (x0, y0), width, height = world.offset, world.width, world.height
+    at = lambda key: _join(dist_path, key)  # noqa: E731
+    if name == "manual":
+        state = group.get("state")
+        goal = group.get("goal")
+        return (_fan_out([1, 1, 0] if state is None else state, number, _join(path, "state")),
+                _fan_out([1, 9, 0] if goal is None else goal, number, _join(path, "goal")))
+    if name == "random":
+        default_low = [x0 + _MARGIN, y0 + _MARGIN, -math.pi]
+        default_high = [x0 + width - _MARGIN, y0 + height - _MARGIN, math.pi]
+        low = _vector(distribution.get("range_low", default_low), at("range_low"), min_size=3)
+        high = _vector(distribution.get("range_high", default_high), at("range_high"), min_size=3)
+        _bounds(low[:3], high[:3], at("range_high"))
+        spacing = _number(distribution.get("min_distance", 1.0), at("min_distance"))
+        states = _random_points(rng, low, high, number, spacing)
+        goals = _random_points(rng, low, high, number, spacing)
+        return [_Value(s, dist_path) for s in states], [_Value(g, dist_path) for g in goals]
+    radius = _number(distribution.get("radius", min(width, height) / 2 - _MARGIN), at("radius"))
+    cx, cy = _vector(distribution.get("center", [x0 + width / 2, y0 + height / 2]), at("center"), min_size=2)[:2]
+    states, goals = [], []
+    for i in range(number):
+        # Evenly spaced on the circle, facing the centre, each goal diametrically opposite.
+        theta = 2 * math.pi * i / number
+        dx, dy = radius * math.cos(theta), radius * math.sin(theta)
+        states.append(_Value([cx + dx, cy + dy, theta - math.pi], dist_path))
+        goals.append(_Value([cx - dx, cy - dy, theta - math.pi], dist_path))
+    return states, goals
+
+
+def _expand(group: dict, path: str, rng: np.random.Generator, world: WorldSpec) -> list[Entry]:
+    """One entry per object of a group, every key resolved to that object's value."""
+    _check_keys(group, OBJECT_KEYS, path)
+    number = _integer(group.get("number", 1), _join(path, "number"), 0, MAX_OBJECTS)
+    states, goals = _placements(group, number, path, rng, world)
+    entries: list[Entry] = [{"state": states[i], "goal": goals[i]} for i in range(number)]
+    for key, value in group.items():
+        if key in ("number", "distribution", "state", "goal"):
+            continue
+        spread = _sensor_fan_out if key == "sensors" else _fan_out
+        for entry, item in zip(entries, spread(value, number, _join(path, key))):
+            entry[key] = item
+    return entries
+
+
+def _get(entry: Entry, key: str, default: Any, path: str) -> _Value:
+    """An entry's value for ``key``, or ``default`` (also for an explicit null)."""
+    item = entry.get(key)
+    if item is None or item.value is None:
+        return _Value(default, _join(path, key))
+    return item
+
+
+def _state(entry: Entry) -> tuple[float, float, float]:
+    state = entry["state"]
+    return _fit3(_vector(state.value, state.path))
+
+
+def _goal(entry: Entry) -> tuple[float, float]:
+    goal = entry["goal"]
+    value = goal.value
+    if isinstance(value, list) and value and isinstance(value[0], list):
+        # A list of goals is visited in order; the scenario's goal is the first one.
+        goal = _Value(value[0], f"{goal.path}[0]")
+    x, y = _vector(goal.value, goal.path, min_size=2)[:2]
+    return x, y
+
+
+# -- shapes ----------------------------------------------------------------------------------------
+
+
+def _shape(item: _Value, rng: np.random.Generator, allowed: tuple[str, ...]) -> _Shape:
+    """An IR-SIM ``shape`` mapping as a body-frame outline; draws random shapes from ``rng``."""
+    if item.value is None:
+        # IR-SIM's fallback for an object without a shape (it logs a warning).
+        return _Shape("circle", np.zeros((1, 2)), radius=1.0)
+    shape = _mapping(item.value, item.path)
+    at = lambda key: _join(item.path, key)  # noqa: E731
+    name = _text(shape.get("name", "circle"), at("name")).lower()
+    if name not in allowed:
+        raise _fail(at("name"), f"unsupported shape {name!r}; allowed: {', '.join(allowed)}")
+    _check_keys(shape, SHAPE_KEYS[name], item.path)
+    # An Ackermann wheelbase moves the outline forward by half of it, as in IR-SIM.
+    shift = 0.5 * _number(shape["wheelbase"], at("wheelbase"), 0) if shape.get("wheelbase") is not None else 0.0
+    random_shape = shape.get("random_shape") is not None and _flag(shape["random_shape"], at("random_shape"))
+    if name == "circle":
+        center = np.array([_vector(shape.get("center", [0, 0]), at("center"), size=2)]) + [shift, 0.0]
+        if random_shape:
+            low, high = _vector(shape.get("radius_range", [0.1, 1.0]), at("radius_range"), size=2)
+            _bounds([low], [high], at("radius_range"))
+            radius = float(rng.uniform(low, high))
+            if radius <= 0:
+                raise _fail(at("radius_range"), f"must give radii > 0 (drew {radius:g})")
+        else:
+            radius = _number(shape.get("radius", 0.2), at("radius"), 0, strict=True)
+        return _Shape("circle", center, radius=radius)
+    if name == "rectangle":
+        length = _number(shape.get("length", 1.0), at("length"), 0, strict=True)
+        width = _number(shape.get("width", 1.0), at("width"), 0, strict=True)
+        return _Shape("rectangle", np.array([[shift, 0.0]]), length=length, width=width)
+    if "vertices" in shape or name == "linestring":
+        # IR-SIM requires a linestring's vertices even when it draws a random one instead.
+        vertices = _points(shape.get("vertices"), at("vertices"), 3 if name == "polygon" else 2)
+    else:
+        vertices = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])  # IR-SIM's default square
+    if random_shape:
+        vertices = _random_polygon(shape, item.path, rng, default_convex=name == "linestring")
+    return _Shape(name, vertices)
+
+
+def _random_polygon(shape: dict, path: str, rng: np.random.Generator, default_convex: bool) -> np.ndarray:
+    """A random star-shaped polygon, drawn in IR-SIM's order: centre, mean radius, irregularity,
+    spikiness, vertex count, angle steps, start angle, then one radius per vertex."""
+    at = lambda key: _join(path, key)  # noqa: E731
+    convex = _flag(shape.get("is_convex", default_convex), at("is_convex"))
+    center_range = _vector(shape.get("center_range", [0, 0, 0, 0]), at("center_range"), size=4)
+    radius_range = _vector(shape.get("avg_radius_range", [0.1, 1]), at("avg_radius_range"), size=2)
+    irregularity_range = _vector(shape.get("irregularity_range", [0, 1]), at("irregularity_range"), size=2)
+    spike_default = [0, 0] if convex else [0, 1]
+    spike_range = _vector(shape.get("spikeyness_range", spike_default), at("spikeyness_range"), size=2)
+    _bounds(center_range[0:2], center_range[2:], at("center_range"))
+    _bounds(radius_range[:1], radius_range[1:], at("avg_radius_range"))
+    _bounds(irregularity_range[:1], irregularity_range[1:], at("irregularity_range"))
+    _bounds(spike_range[:1], spike_range[1:], at("spikeyness_range"))
+    count_range = shape.get("num_vertices_range", [4, 10])
+    if not isinstance(count_range, list) or len(count_range) != 2:
+        raise _fail(at("num_vertices_range"), f"expected a list of 2 integers (got {count_range!r})")
+    low_count = _integer(count_range[0], at("num_vertices_range") + "[0]", 3, MAX_VERTICES - 1)
+    high_count = _integer(count_range[1], at("num_vertices_range") + "[1]", low_count + 1, MAX_VERTICES)
+    center = rng.uniform(low=center_range[0:2], high=center_range[2:], size=(1, 2))[0]
+    avg_radius = float(rng.uniform(low=radius_range[0], high=radius_range[1], size=(1,))[0])
+    irregularity = float(rng.uniform(low=irregularity_range[0], high=irregularity_range[1], size=(1,))[0])
+    spikiness = float(rng.uniform(low=spike_range[0], high=spike_range[1], size=(1,))[0])
+    count = int(rng.integers(low=low_count, high=high_count, size=(1,))[0])
+    if not (0 <= irregularity <= 1 and 0 <= spikiness <= 1) or avg_radius <= 0:
+        raise _fail(path, "random polygon ranges must give irregularity and spikeyness in [0, 1] and radii > 0")
+    spread = irregularity * 2 * math.pi / count
+    steps = [float(rng.uniform(2 * math.pi / count - spread, 2 * math.pi / count + spread)) for _ in range(count)]
+    scale = sum(steps) / (2 * math.pi)
+    angle = float(rng.uniform(0, 2 * math.pi))
+    vertices = []
+    for step in steps:
+        radius = min(max(float(rng.normal(avg_radius, spikiness * avg_radius)), 0.0), 2 * avg_radius)
+        vertices.append((center[0] + radius * math.cos(angle), center[1] + radius * math.sin(angle)))
+        angle += step / scale
+    return np.array(vertices)
+
+
+def _transform(points: np.ndarray, state: tuple[float, float, float]) -> np.ndarray:
+    """Body frame to world frame, as IR-SIM's geometry transform: rotate by theta, then translate."""
+    x, y, theta = state
+    c, s = np.cos(theta), np.sin(theta)
+    return np.column_stack((points[:, 0] * c - points[:, 1] * s + x, points[:, 0] * s + points[:, 1] * c + y))
+
+
+def circle_vertices(cx: float, cy: float, radius: float) -> np.ndarray:
+    """The 64-gon shapely's ``Point(cx, cy).buffer(radius)`` gives: from (cx + r, cy), clockwise."""
+    angles = -2.0 * np.pi * np.arange(CIRCLE_SEGMENTS) / CIRCLE_SEGMENTS
+    return np.column_stack((cx + radius * np.cos(angles), cy + radius * np.sin(angles)))
+
+
+def _orientation(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
+    return float((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
+
+
+def _segments_meet(p1: np.ndarray, p2: np.ndarray, q1: np.ndarray, q2: np.ndarray) -> bool:
+    """Whether two closed segments share a point (touching counts)."""
+    d1, d2 = _orientation(q1, q2, p1), _orientation(q1, q2, p2)
+    d3, d4 = _orientation(p1, p2, q1), _orientation(p1, p2, q2)
+    if ((d1 > 0) != (d2 > 0)) and ((d3 > 0) != (d4 > 0)) and 0 not in (d1, d2, d3, d4):
+        return True
+
+    def on(a: np.ndarray, b: np.ndarray, p: np.ndarray, d: float) -> bool:
+        return d == 0 and min(a[0], b[0]) <= p[0] <= max(a[0], b[0]) and min(a[1], b[1]) <= p[1] <= max(a[1], b[1])
+
+    return on(q1, q2, p1, d1) or on(q1, q2, p2, d2) or on(p1, p2, q1, d3) or on(p1, p2, q2, d4)
+
+
+def is_simple_polygon(vertices: np.ndarray) -> bool:
+    """Whether the closed ring has area and no edge meets a non-adjacent edge (shapely's validity)."""
+    n = len(vertices)
+    x, y = vertices[:, 0], vertices[:, 1]
+    if n < 3 or abs(float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))) < 1e-12:
+        return False
+    for i in range(n):
+        for j in range(i + 1, n):
+            if j == i + 1 or (i == 0 and j == n - 1):
+                continue
+            if _segments_meet(vertices[i], vertices[(i + 1) % n], vertices[j], vertices[(j + 1) % n]):
+                return False
+    return True
+
+
+def _polygon_ring(vertices: np.ndarray, path: str) -> np.ndarray:
+    """A polygon's ring without a repeated closing vertex; an invalid one becomes its bounding box,
+    as IR-SIM replaces it by the envelope of its repaired form."""
+    if len(vertices) > 3 and np.array_equal(vertices[0], vertices[-1]):
+        vertices = vertices[:-1]
+    if is_simple_polygon(vertices):
+        return vertices
+    (x0, y0), (x1, y1) = vertices.min(axis=0), vertices.max(axis=0)
+    if x1 - x0 <= 0 or y1 - y0 <= 0:
+        raise _fail(path, "the polygon has no area; allowed: at least 3 vertices not on one line")
+    return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
+
+
+def _obstacle(shape: _Shape, state: tuple[float, float, float], unobstructed: bool, shape_path: str) -> Any:
+    """A shape placed at a state as a project obstacle."""
+    if shape.kind == "circle":
+        ring = circle_vertices(shape.points[0, 0], shape.points[0, 1], shape.radius)
+        return PolygonObstacle(vertices=[tuple(p) for p in _transform(ring, state)], unobstructed=unobstructed)
+    if shape.kind == "rectangle":
+        x, y = _transform(shape.points, state)[0]
+        return BoxObstacle(x=x, y=y, length=shape.length, width=shape.width, yaw=state[2], unobstructed=unobstructed)
+    if shape.kind == "polygon":
+        ring = _polygon_ring(shape.points, _join(shape_path, "vertices"))
+        return PolygonObstacle(vertices=[tuple(p) for p in _transform(ring, state)], unobstructed=unobstructed)
+    return SegmentObstacle(points=[tuple(p) for p in _transform(shape.points, state)], unobstructed=unobstructed)
+
+
+# -- robots, sensors, obstacles ---------------------------------------------------------------------
+
+
+def _kinematics_name(entry: Entry, path: str) -> str | None:
+    """The validated kinematics name of an object (None: passive, i.e. static)."""
+    item = _get(entry, "kinematics", None, path)
+    if item.value is None:
+        return None
+    kinematics = _mapping(item.value, item.path)
+    _check_keys(kinematics, KINEMATICS_KEYS, item.path)
+    if "name" not in kinematics:
+        return None
+    name_path = _join(item.path, "name")
+    return _text(_text(kinematics["name"], name_path).lower(), name_path, KINEMATICS_NAMES)
+
+
+def _check_diff_drive(entry: Entry, path: str) -> None:
+    """The controlled robot must be an IR-SIM diff drive that can move and has no motion noise."""
+    item = _get(entry, "kinematics", None, path)
+    allowed = "allowed: {name: diff}"
+    if item.value is None:
+        raise _fail(item.path, f"missing (IR-SIM would make the robot static); {allowed}")
+    kinematics = _mapping(item.value, item.path)
+    name = kinematics.get("name")
+    if not isinstance(name, str) or name.lower() != "diff":
+        raise _fail(item.path, f"unsupported kinematics {name!r} for the controlled robot; {allowed}")
+    _check_keys(kinematics, DIFF_KINEMATICS_KEYS, item.path)
+    if _flag(kinematics.get("noise", False), _join(item.path, "noise")):
+        raise _fail(_join(item.path, "noise"), "motion noise is not modelled; allowed: false")
+    if _flag(_get(entry, "static", False, path).value, _join(path, "static")):
+        raise _fail(_join(path, "static"), "a static robot cannot be driven; allowed: false")
+    velocity = _get(entry, "velocity", [0, 0], path)
+    if any(v != 0 for v in _vector(velocity.value, velocity.path, size=2)):
+        raise _fail(velocity.path, "the robot starts at rest; allowed: [0, 0]")
+
+
+def _robot_profile(entry: Entry, shape: _Shape, path: str) -> RobotProfile:
+    """Footprint, velocity limits and acceleration limits of the controlled robot."""
+    if shape.kind == "circle" and np.any(shape.points != 0):
+        raise _fail(_join(path, "shape.center"), "an off-centre footprint is not supported; allowed: [0, 0]")
+    if shape.kind == "rectangle" and np.any(shape.points != 0):
+        raise _fail(_join(path, "shape.wheelbase"), "an off-centre footprint is not supported; allowed: null")
+    vel_min = _get(entry, "vel_min", [-1, -1], path)
+    vel_max = _get(entry, "vel_max", [1, 1], path)
+    acce = _get(entry, "acce", [math.inf, math.inf], path)
+    v_min, w_min = _vector(vel_min.value, vel_min.path, size=2, allow_inf=True)
+    v_max, w_max = _vector(vel_max.value, vel_max.path, size=2, allow_inf=True)
+    accel_v, accel_w = _vector(acce.value, acce.path, size=2, allow_inf=True)
+    for low, high, what in ((v_min, v_max, "linear"), (w_min, w_max, "angular")):
+        if low > high:
+            raise _fail(vel_min.path, f"{what} minimum {low:g} exceeds vel_max's {high:g}; allowed: at most vel_max")
+    shape_path = _get(entry, "shape", None, path).path
+    fields = {
+        "v_min": _Value(v_min, vel_min.path), "w_min": _Value(w_min, vel_min.path),
+        "v_max": _Value(v_max, vel_max.path), "w_max": _Value(w_max, vel_max.path),
+        "accel_v": _Value(accel_v, acce.path), "accel_w": _Value(accel_w, acce.path),
+    }
+    if shape.kind == "circle":
+        fields.update(shape=_Value("circle", shape_path), radius=_Value(shape.radius, shape_path))
+    else:
+        fields.update(shape=_Value("box", shape_path), length=_Value(shape.length, shape_path),
+                      width=_Value(shape.width, shape_path))
+    return _build(RobotProfile, path, fields)
+
+
+def _lidar(entry: Entry, path: str) -> LidarSpec:
+    """The first lidar2d sensor as a LidarSpec (IR-SIM's lidar2d defaults when there is none)."""
+    item = _get(entry, "sensors", [], path)
+    if not isinstance(item.value, list):
+        raise _fail(item.path, f"expected a list of sensor mappings (got {item.value!r})")
+    sensor, sensor_path = {}, item.path
+    for i, candidate in enumerate(item.value):
+        candidate_path = f"{item.path}[{i}]"
+        _mapping(candidate, candidate_path)
+        key = "name" if "name" in candidate else "type"
+        kind = _text(candidate.get(key, "lidar2d"), _join(candidate_path, key), SENSOR_TYPES)
+        if kind == "lidar2d":
+            sensor, sensor_path = candidate, candidate_path
+            break
+    _check_keys(sensor, LIDAR_KEYS, sensor_path)
+    at = lambda key: _join(sensor_path, key)  # noqa: E731
+    number = _integer(sensor.get("number", 100), at("number"), 1, MAX_BEAMS)
+    angle_range = min(_number(sensor.get("angle_range", math.pi), at("angle_range"), 0, strict=True), 2 * math.pi)
+    offset = _fit3(_vector(sensor.get("offset", [0, 0, 0]), at("offset"), min_size=2))
+    noisy = _flag(sensor.get("noise", False), at("noise"))
+    std = _number(sensor.get("std", 0.2), at("std"), 0)
+    fields = {
+        "beams": _Value(number, at("number")),
+        "range_min": _Value(_number(sensor.get("range_min", 0), at("range_min"), 0), at("range_min")),
+        "range_max": _Value(_number(sensor.get("range_max", 10), at("range_max"), 0, strict=True), at("range_max")),
+        "angle_range": _Value(angle_range, at("angle_range")),
+        "offset": _Value(offset, at("offset")),
+        "noise_std": _Value(std if noisy else 0.0, at("std")),
+    }
+    return _build(LidarSpec, sensor_path, fields)
+
+
+def _static_obstacle(entry: Entry, path: str, rng: np.random.Generator, allowed: tuple[str, ...]) -> Any:
+    """Any object other than the controlled robot: a static obstacle at its initial state."""
+    _kinematics_name(entry, path)
+    item = _get(entry, "shape", None, path)
+    shape = _shape(item, rng, allowed)
+    unobstructed = _flag(_get(entry, "unobstructed", False, path).value, _join(path, "unobstructed"))
+    return _obstacle(shape, _state(entry), unobstructed, item.path)
+
+
+def _parse(data: dict, source: str | Path | None, seed: int | None) -> Scenario:
+    prefix = ""
+    if "irsim" in data:
+        # IR-SIM reads only the ``irsim`` block of a file shared with another simulator.
+        data, prefix = _mapping(data["irsim"], "irsim"), "irsim."
+    for key in data:
+        if key not in TOP_KEYS:
+            raise _fail(f"{prefix}{key}", f"unknown key; allowed: {', '.join(TOP_KEYS)}")
+    rng = np.random.default_rng(seed)
+    world, name = _world(data.get("world"), f"{prefix}world")
+    obstacles: list[Any] = []
+    robot = None
+    for group, path in _groups(data.get("robot"), f"{prefix}robot"):
+        for entry in _expand(group, path, rng, world):
+            # Shapes are read in creation order, so random radii draw from rng as IR-SIM does.
+            if robot is None:
+                _check_diff_drive(entry, path)
+                shape = _shape(_get(entry, "shape", None, path), rng, ROBOT_SHAPES)
+                robot = (entry, path, shape)
+            else:
+                obstacles.append(_static_obstacle(entry, path, rng, OBSTACLE_SHAPES))
+    if robot is None:
+        raise _fail(f"{prefix}robot", "no robot defined; allowed: at least one robot with kinematics {name: diff}")
+    for group, path in _groups(data.get("obstacle"), f"{prefix}obstacle"):
+        for entry in _expand(group, path, rng, world):
+            obstacles.append(_static_obstacle(entry, path, rng, OBSTACLE_SHAPES))
+    entry, path, shape = robot
+    threshold = _get(entry, "goal_threshold", 0.1, path)
+    fields = {
+        "name": _Value(name or (Path(source).stem if source is not None else "irsim"), f"{prefix}world.name"),
+        "world": _Value(world, f"{prefix}world"),
+        "robot": _Value(_robot_profile(entry, shape, path), path),
+        "lidar": _Value(_lidar(entry, path), _join(path, "sensors")),
+        "start": _Value(_state(entry), _join(path, "state")),
+        "goal": _Value(_goal(entry), _join(path, "goal")),
+        "goal_threshold": _Value(_number(threshold.value, threshold.path, 0, strict=True), threshold.path),
+        "obstacles": _Value(obstacles, f"{prefix}obstacle"),
+        "kind": _Value("irsim", prefix or "world"),
+        "seed": _Value(seed if has_random_placement(data) else None, prefix or "world"),
+    }
+    return _build(Scenario, prefix.rstrip("."), fields)
+
+
+def parse_irsim(data: dict, source: str | Path | None = None, seed: int | None = 0) -> Scenario:
+    """A validated :class:`Scenario` from a parsed IR-SIM world YAML mapping.
+
+    ``seed`` drives random placements and shapes. The start may touch an obstacle (IR-SIM allows
+    it), so only types and values are checked, not geometry. Every problem is a one-line
+    :class:`ConfigError` naming the field, e.g. ``obstacle[2].shape.radius: must be > 0 (got -1)``.
+    """
+    try:
+        if not isinstance(data, dict):
+            raise _fail(None, f"expected a YAML mapping at the top level (got {type(data).__name__})")
+        return _parse(data, source, seed)
+    except ConfigError as exc:
+        raise (exc.with_source(source) if source is not None else exc) from None
+
+
+def has_random_placement(data: dict) -> bool:
+    """Whether any robot or obstacle uses ``distribution: random`` or a ``random_shape``."""
+    if isinstance(data, dict) and isinstance(data.get("irsim"), dict):
+        data = data["irsim"]
+    if not isinstance(data, dict):
+        return False
+    for section in ("robot", "obstacle"):
+        groups = data.get(section)
+        for group in groups if isinstance(groups, list) else [groups]:
+            if not isinstance(group, dict):
+                continue
+            distribution = group.get("distribution")
+            if isinstance(distribution, dict) and distribution.get("name") == "random":
+                return True
+            shapes = group.get("shape")
+            shapes = shapes if isinstance(shapes, list) else [shapes]
+            if any(isinstance(shape, dict) and shape.get("random_shape") for shape in shapes):
+                return True
+    return False
