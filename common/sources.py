@@ -7,7 +7,7 @@ the whole sequence of episodes whatever the source.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Protocol, Sequence
+from typing import Mapping, Protocol, Sequence
 
 import numpy as np
 
@@ -55,6 +55,20 @@ class GeneratorSource:
         return generate(self.kind, int(rng.integers(2**31 - 1)), self.difficulty, "train", self.template)
 
 
+class MixSource:
+    """Each episode a kind drawn by weight, then a fresh training-split scenario of that kind."""
+
+    def __init__(self, weights: Mapping[str, float], difficulty: float = 0.5, template: Scenario | None = None) -> None:
+        if not weights or any(w <= 0 for w in weights.values()):
+            raise ConfigError(None, "world", "a mix needs at least one kind, each with a positive weight")
+        self.sources = [_kind_source(kind, difficulty, template) for kind in weights]
+        total = float(sum(weights.values()))
+        self.probabilities = [w / total for w in weights.values()]
+
+    def draw(self, rng: np.random.Generator) -> Scenario:
+        return self.sources[int(rng.choice(len(self.sources), p=self.probabilities))].draw(rng)
+
+
 class FileSource:
     """A world file; redrawn each episode only if it places objects at random (IR-SIM ``distribution``)."""
 
@@ -70,15 +84,25 @@ class FileSource:
         return self._read(self.path, seed=int(rng.integers(2**31 - 1))) if self.random else self.scenario
 
 
-def scenario_source(world: Scenario | str | Path | Sequence[Scenario] | ScenarioSource, difficulty: float = 0.5,
-                    template: Scenario | None = None) -> ScenarioSource:
+def _kind_source(kind: str, difficulty: float, template: Scenario | None) -> GeneratorSource:
+    if kind not in KINDS:
+        raise ConfigError(None, "world", f"unknown scenario kind {kind!r}; allowed: {', '.join(KINDS)}")
+    # The warehouse is defined by its 31 obstacles: it is always drawn at full difficulty.
+    return GeneratorSource(kind, 1.0 if kind == "warehouse" else difficulty, template)
+
+
+def scenario_source(world: Scenario | str | Path | Sequence[Scenario] | Mapping[str, float] | ScenarioSource,
+                    difficulty: float = 0.5, template: Scenario | None = None) -> ScenarioSource:
     """Interpret an env's ``world`` argument: a Scenario, a list of them, a generator kind or suite
-    name (``open``, ``sparse``, ``cluttered``, ``warehouse``, ``trap``), or a YAML path."""
+    name (``open``, ``sparse``, ``cluttered``, ``warehouse``, ``trap``), a mapping of kinds to
+    weights (a mix), or a YAML path."""
     if isinstance(world, Scenario):
         return FixedSource(world)
+    if isinstance(world, Mapping):
+        return MixSource(world, difficulty, template)
     if isinstance(world, (str, Path)):
         if str(world) in KINDS:
-            return GeneratorSource(str(world), 1.0 if world == "warehouse" else difficulty, template)
+            return _kind_source(str(world), difficulty, template)
         if Path(world).suffix in (".yaml", ".yml") or Path(world).exists():
             return FileSource(world)
         raise ConfigError(None, "world", f"{str(world)!r} is neither a scenario kind ({', '.join(KINDS)}) nor a YAML file")

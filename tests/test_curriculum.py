@@ -42,7 +42,7 @@ def _with(change: dict, stage: dict | None = None) -> dict:
     (_with({}, {"budget": -5}), "stages.0.budget", "greater than or equal to 1"),
     (_with({}, {"hyperparams": {"learning_rte": 0.1}}), "stages.0.hyperparams.learning_rte", "not a PPO argument; allowed:"),
     (_with({}, {"reward": {"speed": 1}}), "stages.0.reward.speed", "unknown reward term"),
-    (_with({}, {"scenarios": {"kind": "sparse", "suite": "sparse"}}), "stages.0.scenarios", "exactly one of kind, suite or file"),
+    (_with({}, {"scenarios": {"kind": "sparse", "suite": "sparse"}}), "stages.0.scenarios", "exactly one of kind, mix, suite or file"),
     (_with({}, {"eval": {"suite": "mars"}}), "stages.0.eval.suite", "unknown suite"),
     (_with({}, {"init_from": "previous"}), "stages.0.init_from", "the first stage has no previous stage"),
     (_with({"stages": []}), "stages", "at least 1 item"),

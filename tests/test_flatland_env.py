@@ -123,3 +123,12 @@ def test_rgb_array_frames_and_gif(tmp_path):
 
     with Image.open(path) as gif:
         assert gif.n_frames >= 2
+
+
+def test_a_mix_of_kinds_draws_each_by_weight():
+    env = make(world={"cluttered": 3, "trap": 1})
+    kinds = []
+    for seed in range(80):
+        env.reset(seed=seed)
+        kinds.append(env.unwrapped.scenario.kind)
+    assert set(kinds) == {"cluttered", "trap"} and 0.6 < kinds.count("cluttered") / len(kinds) < 0.9

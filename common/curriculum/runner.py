@@ -125,7 +125,7 @@ class EvalLog:
 
 def _make_env_kwargs(stage: StageSpec) -> dict:
     spec = stage.scenarios
-    world = spec.kind or spec.suite or spec.file
+    world = spec.kind or spec.mix or spec.suite or spec.file
     return dict(world=world, observation=stage.observation, reward=stage.reward, max_steps=stage.max_steps,
                 difficulty=spec.difficulty)
 

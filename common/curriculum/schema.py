@@ -46,18 +46,19 @@ class _Strict(BaseModel):
 
 
 class ScenarioSpec(_Strict):
-    """Where a stage's training scenarios come from: exactly one of kind, suite or file."""
+    """Where a stage's training scenarios come from: exactly one of kind, mix, suite or file."""
 
     kind: Literal[KINDS] | None = None  # type: ignore[valid-type]
+    mix: dict[Literal[KINDS], Annotated[float, Field(gt=0.0)]] | None = None  # type: ignore[valid-type]
     difficulty: Annotated[float, Field(ge=0.0, le=1.0)] = 0.5
     suite: str | None = None
     file: str | None = None
 
     @model_validator(mode="after")
     def _exactly_one(self) -> "ScenarioSpec":
-        given = [k for k in ("kind", "suite", "file") if getattr(self, k) is not None]
+        given = [k for k in ("kind", "mix", "suite", "file") if getattr(self, k) is not None]
         if len(given) != 1:
-            raise ValueError(f"give exactly one of kind, suite or file (got {', '.join(given) or 'none'})")
+            raise ValueError(f"give exactly one of kind, mix, suite or file (got {', '.join(given) or 'none'})")
         if self.suite is not None and self.suite not in SUITES:
             raise ValueError(f"unknown suite {self.suite!r}; allowed: {', '.join(SUITES)}")
         return self
