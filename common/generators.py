@@ -51,8 +51,10 @@ class _Layout:
 
     def fits(self, obstacle: Obstacle) -> bool:
         outline = _outline(obstacle)
-        world = self.template.world
-        if not all(world.contains(x, y, margin=self.clearance) for x, y in outline):
+        world, margin = self.template.world, self.clearance
+        low = np.array(world.offset) + margin
+        high = np.array(world.offset) + (world.width - margin, world.height - margin)
+        if (outline < low).any() or (outline > high).any():
             return False
         ends = np.array([self.start[:2], self.goal])
         if obstacle.sdf(ends).min() < self.template.robot.bounding_radius + 0.3:
