@@ -46,6 +46,9 @@ def _with(change: dict, stage: dict | None = None) -> dict:
     (_with({}, {"eval": {"suite": "mars"}}), "stages.0.eval.suite", "unknown suite"),
     (_with({}, {"init_from": "previous"}), "stages.0.init_from", "the first stage has no previous stage"),
     (_with({"stages": []}), "stages", "at least 1 item"),
+    (_with({}, {"hyperparams": {"learning_rate": "cos_1e-3"}}), "stages.0.hyperparams.learning_rate", "'lin_<number>'"),
+    (_with({}, {"algorithm": "td3", "hyperparams": {"action_noise": {"type": "pink"}}}),
+     "stages.0.hyperparams.action_noise", "allowed: {type: normal | ornstein_uhlenbeck"),
 ])
 def test_schema_errors_name_the_field_and_what_is_allowed(data, field, message):
     with pytest.raises(ConfigError) as error:
@@ -181,3 +184,13 @@ def test_eval_json_schema_and_bad_policy_files(tmp_path, capsys):
     assert main(["eval", "--policy", str(tmp_path / "junk.zip")]) == 2
     assert "not a zip file" in capsys.readouterr().err
     assert main(["eval", "--policy", str(tmp_path / "missing.zip")]) == 2
+
+
+def test_zoo_style_schedules_and_action_noise():
+    from stable_baselines3.common.noise import NormalActionNoise
+
+    from common.curriculum.hyperparams import resolve_hyperparams
+
+    out = resolve_hyperparams({"learning_rate": "lin_1e-3", "action_noise": {"type": "normal", "sigma": 0.2}, "gamma": 0.98})
+    assert out["learning_rate"](1.0) == pytest.approx(1e-3) and out["learning_rate"](0.25) == pytest.approx(2.5e-4)
+    assert isinstance(out["action_noise"], NormalActionNoise) and out["gamma"] == 0.98

@@ -28,6 +28,7 @@ from pathlib import Path
 import yaml
 
 import common
+from common.curriculum.hyperparams import resolve_hyperparams
 from common.curriculum.policy import Normalizer, PolicyAgent, algorithm_class, atomic_write, save_policy
 from common.curriculum.schema import CurriculumConfig, StageSpec
 from common.errors import ConfigError
@@ -223,7 +224,7 @@ class Runner:
             self._restore_normalizer(model, paths.last, venv)
         else:
             model = algo("MlpPolicy", venv, seed=seed, device=self.device, verbose=0,
-                         tensorboard_log=str(paths.tensorboard), **stage.hyperparams)
+                         tensorboard_log=str(paths.tensorboard), **resolve_hyperparams(stage.hyperparams))
             source = self._init_source(index, stage)
             if source is not None:
                 model.set_parameters(str(source), exact_match=True, device=self.device)
@@ -257,7 +258,8 @@ class Runner:
     def _restore_normalizer(model, source: Path, venv) -> None:
         from stable_baselines3.common.vec_env import VecNormalize
 
-        from common.curriculum.policy import read_manifest
+        from common.curriculum.hyperparams import resolve_hyperparams
+from common.curriculum.policy import read_manifest
 
         _, normalizer = read_manifest(source)
         if normalizer is not None and isinstance(venv, VecNormalize):
@@ -273,7 +275,8 @@ class Runner:
 
     def final_evaluation(self, stage: StageSpec, policy: Path) -> Summary:
         """The report's evaluation of a stage's policy on the test draw of its eval suite."""
-        from common.curriculum.policy import load_policy
+        from common.curriculum.hyperparams import resolve_hyperparams
+from common.curriculum.policy import load_policy
 
         agent = load_policy(policy, device=self.device, name=stage.name)
         episodes = stage.eval.final_episodes or stage.eval.episodes

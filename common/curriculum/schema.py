@@ -31,6 +31,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from common.curriculum.hyperparams import resolve_hyperparams
 from common.errors import ConfigError
 from common.generators import KINDS, SUITES
 from common.observations import LAYOUTS
@@ -136,6 +137,7 @@ def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
         if key not in allowed:
             raise ConfigError(source, f"{field}.hyperparams.{key}",
                               f"not a {stage.algorithm.upper()} argument; allowed: {', '.join(sorted(allowed))}")
+    resolve_hyperparams(stage.hyperparams, source=source, field=f"{field}.hyperparams")
     if stage.init_from == "previous" and index == 0:
         raise ConfigError(source, f"{field}.init_from", "the first stage has no previous stage; allowed: null or a policy path")
     if stage.init_from not in (None, "previous") and not Path(stage.init_from).is_file():
