@@ -258,8 +258,7 @@ class Runner:
     def _restore_normalizer(model, source: Path, venv) -> None:
         from stable_baselines3.common.vec_env import VecNormalize
 
-        from common.curriculum.hyperparams import resolve_hyperparams
-from common.curriculum.policy import read_manifest
+        from common.curriculum.policy import read_manifest
 
         _, normalizer = read_manifest(source)
         if normalizer is not None and isinstance(venv, VecNormalize):
@@ -275,8 +274,7 @@ from common.curriculum.policy import read_manifest
 
     def final_evaluation(self, stage: StageSpec, policy: Path) -> Summary:
         """The report's evaluation of a stage's policy on the test draw of its eval suite."""
-        from common.curriculum.hyperparams import resolve_hyperparams
-from common.curriculum.policy import load_policy
+        from common.curriculum.policy import load_policy
 
         agent = load_policy(policy, device=self.device, name=stage.name)
         episodes = stage.eval.final_episodes or stage.eval.episodes
