@@ -60,3 +60,56 @@ def test_bench_json_has_the_agreed_keys(capsys):
     assert results["obstacles"] == 31 and results["lidar_beams"] == 36
     assert results["flatland_steps_per_s"] > 0
     assert "irsim_steps_per_s" in results
+
+
+@pytest.mark.parametrize("argv, expected", [
+    (["compare", "--episodes", "0"], "--episodes: must be at least 1"),
+    (["compare", "--suite", "mars"], "invalid choice: 'mars'"),
+    (["compare", "--scenario-file", "/no/such.yaml"], "/no/such.yaml: no such file"),
+    (["compare", "--controllers", "teleport"], "controllers.teleport: unknown controller; allowed: go_to_goal"),
+    (["eval", "--policy", "/no/such.zip"], "/no/such.zip: no such file"),
+    (["render", "--agent", "teleport"], "unknown controller"),
+    (["bench", "--steps", "lots"], "invalid int value"),
+    (["fly"], "invalid choice: 'fly'"),
+])
+def test_bad_flags_and_missing_files_are_one_line_exit_2(argv, expected):
+    result = subprocess.run([sys.executable, "-m", "common.cli", *argv], capture_output=True, text=True)
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and expected in lines[0] and "Traceback" not in result.stderr, result.stderr
+
+
+def test_compare_writes_table_csv_chart_and_prints_the_agreed_json(tmp_path, capsys):
+    out = tmp_path / "cmp"
+    assert main(["compare", "--suite", "sparse", "--episodes", "2", "--controllers", "go_to_goal,astar_pursuit",
+                 "--out", str(out), "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert set(result) == {"go_to_goal", "astar_pursuit"}
+    for figures in result.values():
+        assert {"success_rate", "collision_rate", "timeout_rate", "spl", "mean_steps", "mean_path_length",
+                "episodes"} <= set(figures) and figures["episodes"] == 2
+    assert (out / "comparison.md").read_text().count("| astar_pursuit |") == 1
+    assert (out / "episodes.csv").read_text().count("\n") == 5
+    assert (out / "comparison.png").stat().st_size > 1000
+
+
+def test_compare_reads_an_irsim_world_file(tmp_path, capsys):
+    world = tmp_path / "irsim.yaml"
+    world.write_text("world: {height: 10, width: 10}\nrobot:\n  kinematics: {name: diff}\n  shape: {name: circle, radius: 0.2}\n"
+                     "  state: [1, 1, 0]\n  goal: [8, 8, 0]\n  goal_threshold: 0.3\n"
+                     "  sensors: [{name: lidar2d, range_max: 5, angle_range: 6.283, number: 36}]\n"
+                     "obstacle:\n  - shape: {name: circle, radius: 0.5}\n    state: [5, 5, 0]\n")
+    assert main(["compare", "--scenario-file", str(world), "--episodes", "2", "--controllers", "pid_blend",
+                 "--out", str(tmp_path / "o"), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["pid_blend"]["success_rate"] == 1.0
+
+
+def test_render_writes_a_gif_and_the_drift_plot(tmp_path, capsys):
+    gif, drift = tmp_path / "e.gif", tmp_path / "d.png"
+    assert main(["render", "--suite", "sparse", "--agent", "astar_pursuit", "--out", str(gif), "--every", "5",
+                 "--drift", str(drift), "--encoder-noise", "0.05"]) == 0
+    from PIL import Image
+
+    with Image.open(gif) as image:
+        assert image.n_frames > 3
+    assert drift.stat().st_size > 1000 and "odometry drift" in capsys.readouterr().out

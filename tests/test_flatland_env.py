@@ -132,3 +132,15 @@ def test_a_mix_of_kinds_draws_each_by_weight():
         env.reset(seed=seed)
         kinds.append(env.unwrapped.scenario.kind)
     assert set(kinds) == {"cluttered", "trap"} and 0.6 < kinds.count("cluttered") / len(kinds) < 0.9
+
+
+def test_human_render_mode_runs_headless(monkeypatch):
+    """The human path draws into a pyplot figure; under the Agg backend it must run without a display."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    env = make(world="sparse", render_mode="human", max_steps=3)
+    env.reset(seed=0)
+    env.step(np.array([0.0, 0.5], dtype=np.float32))
+    assert env.unwrapped._renderer is not None and env.unwrapped._renderer.human
+    env.close()
