@@ -83,6 +83,11 @@ def test_run_writes_every_artefact_and_resumes_after_kill(tmp_path):
     run = json.loads((whole / "run.json").read_text())
     assert run["package_version"] and "git_commit" in run and run["seed"] == 0
     assert "| open | ppo | nav7 | 6,144 |" in (whole / "report.md").read_text()
+    from common.curriculum.policy import read_manifest
+
+    manifest, _ = read_manifest(whole / "stages/0-open/policy.zip")
+    assert manifest["curriculum"] == "tiny" and manifest["observation"] == "nav7" and manifest["timesteps"] > 0
+    assert manifest["final_eval"]["draw"] == "test" and manifest["final_eval"]["episodes"] == 6
 
     killed = tmp_path / "killed"
     process = _run(killed)

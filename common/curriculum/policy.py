@@ -94,6 +94,20 @@ def save_policy(model, path: str | Path, manifest: dict[str, Any], normalizer: N
     return atomic_write(Path(path), write)
 
 
+def update_manifest(path: str | Path, extra: dict[str, Any]) -> Path:
+    """Add keys to a policy zip's manifest (the zip is rebuilt and swapped in atomically)."""
+    manifest, _ = read_manifest(path)
+    manifest.update(extra)
+
+    def write(tmp: Path) -> None:
+        with zipfile.ZipFile(path) as source, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as target:
+            for item in source.infolist():
+                data = json.dumps(manifest, indent=2).encode() if item.filename == MANIFEST else source.read(item)
+                target.writestr(item, data)
+
+    return atomic_write(Path(path), write)
+
+
 def read_manifest(path: str | Path) -> tuple[dict, Normalizer | None]:
     """The manifest and normaliser of a policy zip (one-line errors for anything else)."""
     path = Path(path)

@@ -29,7 +29,7 @@ import yaml
 
 import common
 from common.curriculum.hyperparams import resolve_hyperparams
-from common.curriculum.policy import Normalizer, PolicyAgent, algorithm_class, atomic_write, save_policy
+from common.curriculum.policy import Normalizer, PolicyAgent, algorithm_class, atomic_write, update_manifest
 from common.curriculum.schema import CurriculumConfig, StageSpec
 from common.errors import ConfigError
 from common.evaluation import Summary, evaluate
@@ -280,8 +280,9 @@ class Runner:
         episodes = stage.eval.final_episodes or stage.eval.episodes
         scenarios = get_suite(stage.eval.suite).scenarios(count=episodes, seed=TEST_SEED_SHIFT)
         (summary,) = evaluate([agent], scenarios, stage.world, seed=TEST_SEED_SHIFT, max_steps=stage.max_steps)
-        _write_json(self.stage_paths(self.config.stages.index(stage), stage).root / "final_eval.json",
-                    summary.to_json())
+        figures = {"suite": stage.eval.suite, "draw": "test", "first_seed": TEST_SEED_SHIFT, **summary.to_json()}
+        _write_json(policy.parent / "final_eval.json", figures)
+        update_manifest(policy, {"final_eval": figures})
         return summary
 
 
