@@ -2,6 +2,12 @@
 
 Forward-only is deliberate: both tutorials found that a robot allowed to reverse learns to back
 away from obstacles instead of going round them.
+
+Two mappings of a[0] to v:
+
+* ``linear`` (default): v = (a[0] + 1) / 2 · v_max, the whole range spread over [0, v_max].
+* ``rectified``: v = max(a[0], 0) · v_max, so the lower half of the range stands still. A Gaussian
+  policy then explores turning on the spot as often as driving, which a linear mapping makes rare.
 """
 
 from __future__ import annotations
@@ -9,24 +15,32 @@ from __future__ import annotations
 import numpy as np
 from gymnasium import spaces
 
+from common.errors import ConfigError
 from common.scenario import RobotProfile
 
 ACTION_SPACE = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+MAPPINGS = ("linear", "rectified")
 
 
 class ActionMapping:
-    """a[0] in [-1, 1] -> v in [0, v_max]; a[1] in [-1, 1] -> w in [-w_max, w_max]."""
+    """a[0] in [-1, 1] -> v in [0, v_max] (``linear`` or ``rectified``); a[1] in [-1, 1] -> w in [-w_max, w_max]."""
 
-    def __init__(self, robot: RobotProfile) -> None:
+    def __init__(self, robot: RobotProfile, kind: str = "linear") -> None:
+        if kind not in MAPPINGS:
+            raise ConfigError(None, "action_mapping", f"unknown mapping {kind!r}; allowed: {', '.join(MAPPINGS)}")
+        self.kind = kind
         self.v_max = robot.v_max
         self.w_max = robot.w_max
+        self._rectified = kind == "rectified"
 
     def to_velocity(self, action) -> tuple[float, float]:
         """Velocities for an action (clipped into [-1, 1] first)."""
         a0 = min(max(float(action[0]), -1.0), 1.0)
         a1 = min(max(float(action[1]), -1.0), 1.0)
-        return 0.5 * (a0 + 1.0) * self.v_max, a1 * self.w_max
+        v = max(a0, 0.0) * self.v_max if self._rectified else 0.5 * (a0 + 1.0) * self.v_max
+        return v, a1 * self.w_max
 
     def to_action(self, v: float, w: float) -> np.ndarray:
-        """The action that commands (v, w), clipped to what the mapping can express."""
-        return np.clip(np.array([2.0 * v / self.v_max - 1.0, w / self.w_max], dtype=np.float32), -1.0, 1.0)
+        """An action that commands (v, w), clipped to what the mapping can express."""
+        a0 = v / self.v_max if self._rectified else 2.0 * v / self.v_max - 1.0
+        return np.clip(np.array([a0, w / self.w_max], dtype=np.float32), -1.0, 1.0)

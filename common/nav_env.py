@@ -45,12 +45,14 @@ class NavigationEnv(gym.Env):
         difficulty: float = 0.5,
         goal_distance_scale: float = DEFAULT_GOAL_DISTANCE_SCALE,
         template: Scenario | None = None,
+        action_mapping: str = "linear",
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode {render_mode!r}; allowed: None, {', '.join(self.metadata['render_modes'])}")
         self.render_mode = render_mode
         self.source = scenario_source(world, difficulty, template)
         self.observation_name = observation
+        self.action_mapping = action_mapping
         self.goal_distance_scale = goal_distance_scale
         self.reward = Reward(reward)
         self.max_steps = int(max_steps)
@@ -70,7 +72,7 @@ class NavigationEnv(gym.Env):
         self.scenario = scenario
         self.world = self._build_world(scenario)
         self.layout = make_layout(self.observation_name, scenario.robot, scenario.lidar, self.goal_distance_scale)
-        self.actions = ActionMapping(scenario.robot)
+        self.actions = ActionMapping(scenario.robot, self.action_mapping)
         self._goal = scenario.goal
         self._threshold = scenario.goal_threshold
 

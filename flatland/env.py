@@ -20,6 +20,7 @@ class NavEnv(NavigationEnv):
     ## Action Space
     ``Box(-1, 1, (2,), float32)``: a[0] -> linear velocity v in [0, v_max] (forward only), a[1] ->
     angular velocity w in [-w_max, w_max], with the scenario's robot limits (default 1 m/s, 1 rad/s).
+    ``action_mapping="rectified"`` makes a[0] <= 0 a stop instead of spreading a[0] linearly.
 
     ## Observation Space
     ``observation="nav7"`` (default, the tutorial's 7 values) or ``"lidar43"`` (36 lidar sectors);
@@ -42,7 +43,8 @@ class NavEnv(NavigationEnv):
 
     ## Arguments
     ``gymnasium.make("flatland/Nav-v0", world="sparse", observation="nav7", reward="tutorial2d",
-    render_mode=None, max_steps=500, difficulty=0.5, goal_distance_scale=10.0, template=None)``
+    render_mode=None, max_steps=500, difficulty=0.5, goal_distance_scale=10.0, template=None,
+    action_mapping="linear")``
 
     * ``world``: a :class:`Scenario`, a list of them, a kind (``open``, ``sparse``, ``cluttered``,
       ``warehouse``, ``trap``) or the path of a scenario or IR-SIM world YAML.

@@ -144,3 +144,16 @@ def test_human_render_mode_runs_headless(monkeypatch):
     env.step(np.array([0.0, 0.5], dtype=np.float32))
     assert env.unwrapped._renderer is not None and env.unwrapped._renderer.human
     env.close()
+
+
+def test_rectified_mapping_stands_still_on_the_lower_half_of_the_range():
+    env = make(world=Scenario(start=(2, 5, 0), goal=(8, 5)), action_mapping="rectified")
+    env.reset(seed=0)
+    env.step(np.array([-0.4, 0.5], dtype=np.float32))
+    assert env.unwrapped.readings.velocity == (0.0, 0.5)
+    env.step(np.array([0.5, 0.0], dtype=np.float32))
+    assert env.unwrapped.readings.velocity == (0.5, 0.0)
+    from common.actions import ActionMapping
+
+    mapping = ActionMapping(Scenario().robot, "rectified")
+    assert mapping.to_velocity(mapping.to_action(0.3, -0.2)) == pytest.approx((0.3, -0.2))

@@ -133,13 +133,13 @@ class PolicyAgent:
     """
 
     def __init__(self, model, observation: str, goal_distance_scale: float, normalizer: Normalizer | None = None,
-                 name: str = "policy") -> None:
+                 name: str = "policy", action_mapping: str = "linear") -> None:
         self.model, self.observation, self.goal_distance_scale = model, observation, goal_distance_scale
-        self.normalizer, self.name = normalizer, name
+        self.normalizer, self.name, self.action_mapping = normalizer, name, action_mapping
 
     def bind(self, robot: RobotProfile, lidar: LidarSpec) -> None:
         self.layout: ObservationLayout = make_layout(self.observation, robot, lidar, self.goal_distance_scale)
-        self.mapping = ActionMapping(robot)
+        self.mapping = ActionMapping(robot, self.action_mapping)
 
     def reset(self) -> None:
         pass
@@ -158,4 +158,4 @@ def load_policy(path: str | Path, device: str = "cpu", name: str | None = None) 
     manifest, normalizer = read_manifest(path)
     model = algorithm_class(manifest["algorithm"]).load(str(path), device=device)
     return PolicyAgent(model, manifest["observation"], manifest["goal_distance_scale"], normalizer,
-                       name=name or Path(path).stem)
+                       name=name or Path(path).stem, action_mapping=manifest.get("action_mapping", "linear"))

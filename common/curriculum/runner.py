@@ -128,7 +128,7 @@ def _make_env_kwargs(stage: StageSpec) -> dict:
     spec = stage.scenarios
     world = spec.kind or spec.mix or spec.suite or spec.file
     return dict(world=world, observation=stage.observation, reward=stage.reward, max_steps=stage.max_steps,
-                difficulty=spec.difficulty)
+                difficulty=spec.difficulty, action_mapping=stage.action_mapping)
 
 
 def _env_id(stage: StageSpec) -> str:
@@ -267,7 +267,8 @@ class Runner:
     def evaluate_model(self, model, stage: StageSpec, normalizer: Normalizer | None, episodes: int,
                        seed_shift: int) -> Summary:
         """Success and SPL of the current model on the stage's eval suite (a held-out draw)."""
-        agent = PolicyAgent(model, stage.observation, DEFAULT_GOAL_DISTANCE_SCALE, normalizer, name=stage.name)
+        agent = PolicyAgent(model, stage.observation, DEFAULT_GOAL_DISTANCE_SCALE, normalizer, name=stage.name,
+                            action_mapping=stage.action_mapping)
         scenarios = get_suite(stage.eval.suite).scenarios(count=episodes, seed=seed_shift)
         (summary,) = evaluate([agent], scenarios, stage.world, seed=seed_shift, max_steps=stage.max_steps)
         return summary
@@ -290,7 +291,7 @@ def manifest_for(runner: Runner, index: int, stage: StageSpec, timesteps: int, w
                  evaluation: dict | None) -> dict:
     """What a policy zip says about itself."""
     return {"algorithm": stage.algorithm, "observation": stage.observation,
-            "goal_distance_scale": DEFAULT_GOAL_DISTANCE_SCALE, "action": "forward_only_v_w",
+            "goal_distance_scale": DEFAULT_GOAL_DISTANCE_SCALE, "action_mapping": stage.action_mapping,
             "max_steps": stage.max_steps, "curriculum": runner.config.name, "stage": stage.name,
             "stage_index": index, "seed": runner.config.seed + index, "git_commit": git_commit(),
             "package_version": common.__version__, "timesteps": timesteps, "wall_time_s": round(wall_time, 1),

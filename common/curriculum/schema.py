@@ -9,6 +9,7 @@ stages:
     world: flatland      # flatland | physics3d
     scenarios: {kind: sparse, difficulty: 0.5}     # or {suite: NAME} or {file: PATH}
     observation: lidar43 # nav7 | lidar43
+    action_mapping: linear  # linear | rectified (common/actions.py)
     reward: tutorial2d   # a preset or {term: weight | {weight, params}}
     max_steps: 300       # episode length
     algorithm: ppo       # ppo | sac | td3
@@ -31,6 +32,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from common.actions import MAPPINGS
 from common.curriculum.hyperparams import resolve_hyperparams
 from common.errors import ConfigError
 from common.generators import KINDS, SUITES
@@ -94,6 +96,7 @@ class StageSpec(_Strict):
     world: Literal[TIERS] = "flatland"  # type: ignore[valid-type]
     scenarios: ScenarioSpec
     observation: Literal[LAYOUTS] = "lidar43"  # type: ignore[valid-type]
+    action_mapping: Literal[MAPPINGS] = "linear"  # type: ignore[valid-type]
     reward: str | dict[str, Any] = "tutorial2d"
     max_steps: Annotated[int, Field(ge=1)] = 500
     algorithm: Literal[ALGORITHMS] = "ppo"  # type: ignore[valid-type]
