@@ -1,0 +1,145 @@
+"""The 3D robot's sensors: a planar lidar (one ``rayTestBatch`` per scan), an RGB / depth /
+segmentation camera, and an IMU. Every noise draw comes from the world's seeded generator.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+import pybullet as p
+
+from common.readings import Imu as ImuReading
+from common.scenario import LidarSpec
+
+GRAVITY = 9.81
+
+Vector = Sequence[float]
+Quaternion = Sequence[float]
+
+
+class Lidar:
+    """A 2D lidar ``height`` metres above the robot's base frame, its beams level with the floor.
+
+    The beams are :meth:`LidarSpec.beam_angles` turned by the mount's yaw, in that order, from the
+    mount's (x, y) offset in the robot's frame, as in flatland. Rays skip the collision group
+    ``exclude_group`` (the robot's own links). The scan stays level when the body pitches a fraction
+    of a degree on its suspensionless wheels: a tilted plane would read the floor at long range.
+    """
+
+    def __init__(self, spec: LidarSpec, client: int, height: float, rng: np.random.Generator,
+                 exclude_group: int) -> None:
+        self.spec = spec
+        self.client = client
+        self.height = height
+        self.rng = rng
+        angles = spec.beam_angles() + spec.offset[2]
+        self._cos, self._sin = np.cos(angles), np.sin(angles)
+        self._from = np.empty((spec.beams, 3))
+        self._to = np.empty((spec.beams, 3))
+        self._mask = 0xFFFF & ~exclude_group
+
+    def rays(self, x: float, y: float, z: float, yaw: float) -> tuple[np.ndarray, np.ndarray]:
+        """Start and end points (N, 3) of the beams for a robot base frame at (x, y, z, yaw), in
+        buffers the next call overwrites."""
+        mx, my, _ = self.spec.offset
+        c, s = math.cos(yaw), math.sin(yaw)
+        origin = (x + c * mx - s * my, y + s * mx + c * my, z + self.height)
+        reach = self.spec.range_max
+        self._from[:] = origin
+        self._to[:, 0] = origin[0] + reach * (c * self._cos - s * self._sin)
+        self._to[:, 1] = origin[1] + reach * (s * self._cos + c * self._sin)
+        self._to[:, 2] = origin[2]
+        return self._from, self._to
+
+    def scan(self, x: float, y: float, z: float, yaw: float) -> np.ndarray:
+        """Ranges in beam order (a new array each call), clipped to [range_min, range_max]."""
+        hits = p.rayTestBatch(*self.rays(x, y, z, yaw), collisionFilterMask=self._mask, physicsClientId=self.client)
+        spec = self.spec
+        ranges = np.fromiter((hit[2] for hit in hits), float, spec.beams)
+        ranges *= spec.range_max
+        if spec.noise_std > 0.0:
+            # Only returns carry noise; a beam that hit nothing keeps reading range_max, as in flatland.
+            returns = ranges < spec.range_max
+            ranges[returns] += self.rng.normal(0.0, spec.noise_std, int(returns.sum()))
+        return np.clip(ranges, spec.range_min, spec.range_max, out=ranges)
+
+
+class Camera:
+    """A pinhole camera: RGB (uint8), depth in metres and a segmentation image of body ids.
+
+    ``fov`` is the vertical field of view in degrees. Pixels that see nothing read depth ``far``
+    and segmentation -1.
+    """
+
+    def __init__(self, client: int, width: int = 320, height: int = 240, fov: float = 60.0, near: float = 0.05,
+                 far: float = 20.0, renderer: int = p.ER_TINY_RENDERER) -> None:
+        self.client = client
+        self.width, self.height = width, height
+        self.near, self.far = near, far
+        self.renderer = renderer
+        self.projection = p.computeProjectionMatrixFOV(fov, width / height, near, far)
+
+    def from_mount(self, position: Vector, orientation: Quaternion) -> dict[str, np.ndarray]:
+        """An image from a mount looking along its x axis, its z axis up."""
+        m = p.getMatrixFromQuaternion(orientation)
+        forward, up = (m[0], m[3], m[6]), (m[2], m[5], m[8])
+        target = [a + b for a, b in zip(position, forward)]
+        return self.capture(p.computeViewMatrix(position, target, up))
+
+    def look_at(self, eye: Vector, target: Vector, segmentation: bool = True) -> dict[str, np.ndarray]:
+        """An image from ``eye`` towards ``target``, world z up."""
+        return self.capture(p.computeViewMatrix(eye, target, (0.0, 0.0, 1.0)), segmentation)
+
+    def capture(self, view: Sequence[float], segmentation: bool = True) -> dict[str, np.ndarray]:
+        """Render one frame for a view matrix: ``rgb`` (H, W, 3), ``depth`` (H, W) and ``segmentation`` (H, W)."""
+        flags = 0 if segmentation else p.ER_NO_SEGMENTATION_MASK
+        _, _, rgba, zbuffer, mask = p.getCameraImage(self.width, self.height, view, self.projection, flags=flags,
+                                                     renderer=self.renderer, physicsClientId=self.client)
+        rgb = np.ascontiguousarray(np.reshape(rgba, (self.height, self.width, 4))[..., :3], dtype=np.uint8)
+        # The z-buffer holds OpenGL's non-linear depth in [0, 1]; invert the projection for metres.
+        z = np.reshape(zbuffer, (self.height, self.width)).astype(np.float32)
+        depth = self.far * self.near / (self.far - (self.far - self.near) * z)
+        out = {"rgb": rgb, "depth": np.clip(depth, self.near, self.far, out=depth)}  # float32 rounding overshoots far
+        if segmentation:
+            out["segmentation"] = np.reshape(mask, (self.height, self.width)).astype(np.int32)
+        return out
+
+
+def _rotate_into(q: Quaternion, v: Vector) -> tuple[float, float, float]:
+    """Vector ``v`` (world frame) expressed in the frame of orientation ``q`` (x, y, z, w)."""
+    x, y, z, w = -q[0], -q[1], -q[2], q[3]  # the inverse rotation
+    tx, ty, tz = 2.0 * (y * v[2] - z * v[1]), 2.0 * (z * v[0] - x * v[2]), 2.0 * (x * v[1] - y * v[0])
+    return (v[0] + w * tx + y * tz - z * ty, v[1] + w * ty + z * tx - x * tz, v[2] + w * tz + x * ty - y * tx)
+
+
+class Imu:
+    """An IMU at the base's centre of mass: accelerometer (specific force, so gravity reads +9.81
+    m/s² up at rest) and gyroscope, in the body frame, each axis with Gaussian noise.
+
+    The acceleration is the change of the base's velocity over the last control period: what a
+    real IMU averaged over that period would report.
+    """
+
+    def __init__(self, rng: np.random.Generator, accel_noise: float = 0.0, gyro_noise: float = 0.0) -> None:
+        self.rng = rng
+        self.accel_noise, self.gyro_noise = accel_noise, gyro_noise
+        self._previous: Vector = (0.0, 0.0, 0.0)
+
+    def reset(self, velocity: Vector = (0.0, 0.0, 0.0)) -> None:
+        """Forget the last velocity (the robot starts at rest)."""
+        self._previous = velocity
+
+    def read(self, orientation: Quaternion, velocity: Vector, angular_velocity: Vector, dt: float) -> ImuReading:
+        """The reading after a period ``dt`` that ended with these base orientation and velocities."""
+        inv = 1.0 / dt if dt > 0.0 else 0.0
+        specific = [(now - before) * inv for now, before in zip(velocity, self._previous)]
+        specific[2] += GRAVITY
+        self._previous = velocity
+        accel, gyro = _rotate_into(orientation, specific), _rotate_into(orientation, angular_velocity)
+        if self.accel_noise > 0.0 or self.gyro_noise > 0.0:
+            noise = self.rng.normal(0.0, 1.0, 6).tolist()
+            accel = tuple(a + self.accel_noise * n for a, n in zip(accel, noise[:3]))
+            gyro = tuple(g + self.gyro_noise * n for g, n in zip(gyro, noise[3:]))
+        return ImuReading(accel, gyro)

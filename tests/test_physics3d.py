@@ -1,0 +1,471 @@
+"""The 3D tier: URDF, wheel tracking, sensors against geometry, collisions, twin worlds with
+flatland, the env's checkers and determinism, and the GUI under Xvfb. DIRECT mode except the GUI test."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import subprocess
+import sys
+import textwrap
+
+import gymnasium as gym
+import numpy as np
+import pybullet as p
+import pytest
+from gymnasium.utils.env_checker import check_env
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+import physics3d  # noqa: F401  (registers the env)
+from common.bench import bare_pybullet_steps_per_s, camera_fps, physics3d_bench_scenario, physics3d_steps_per_s
+from common.cli import main
+from common.controllers import make_controller
+from common.curriculum.policy import save_policy
+from common.evaluation import run_episode
+from common.generators import generate
+from common.scenario import BoxObstacle, CircleObstacle, LidarSpec, PolygonObstacle, Scenario, SegmentObstacle
+from common.tiers import make_world
+from flatland.world import World as FlatWorld
+from physics3d.robot import (ROBOT_COLLISION_GROUP, ROBOT_PROFILE, TEMPLATE, URDF_PATH, WHEEL_BASE, WHEEL_RADIUS,
+                             Robot)
+from physics3d.sensors import GRAVITY, Lidar
+from physics3d.world import World
+
+OPEN = TEMPLATE.model_copy(update={"start": (5.0, 5.0, 0.0), "goal": (9.0, 9.0)})
+
+
+def scenario(**update) -> Scenario:
+    return OPEN.model_copy(update=update)
+
+
+# --- URDF and wheels ---------------------------------------------------------------------------
+
+def test_urdf_loads_with_the_tutorials_dimensions():
+    client = p.connect(p.DIRECT)
+    try:
+        robot = Robot(client, OPEN.start_pose)
+        assert p.getDynamicsInfo(robot.id, -1, physicsClientId=client)[0] == pytest.approx(2.0)
+        ys = []
+        for joint in robot.wheels:
+            info = p.getJointInfo(robot.id, joint, physicsClientId=client)
+            assert info[2] == p.JOINT_REVOLUTE and info[8] > info[9]  # continuous: no limits (lower > upper)
+            assert p.getDynamicsInfo(robot.id, joint, physicsClientId=client)[0] == pytest.approx(0.1)
+            shape = p.getCollisionShapeData(robot.id, joint, physicsClientId=client)[0]
+            assert shape[2] == p.GEOM_CYLINDER and shape[3][1] == pytest.approx(WHEEL_RADIUS)
+            ys.append(info[14][1])
+        assert abs(ys[0] - ys[1]) == pytest.approx(WHEEL_BASE)
+        names = {p.getJointInfo(robot.id, j, physicsClientId=client)[12].decode()
+                 for j in range(p.getNumJoints(robot.id, physicsClientId=client))}
+        assert {"caster_wheel", "lidar_link", "camera_link"} <= names
+    finally:
+        p.disconnect(client)
+    assert URDF_PATH.exists() and ROBOT_PROFILE.shape == "box" and ROBOT_PROFILE.v_max == 0.5
+
+
+@pytest.mark.parametrize("v, w", [(0.5, 0.0), (0.3, 0.5), (0.2, 1.5), (0.0, -1.5), (0.5, 1.5)])
+def test_wheels_track_the_commanded_velocity_within_five_percent(v, w):
+    world = World(OPEN)
+    world.reset(seed=0)
+    for _ in range(10):  # accelerate
+        world.step(v, w)
+    measured = np.array([world.step(v, w).velocity for _ in range(10)]).mean(axis=0)
+    for commanded, actual in zip((v, w), measured):
+        assert actual == pytest.approx(commanded, rel=0.05, abs=0.005)
+
+
+def test_commands_are_clipped_to_the_profile_limits():
+    world = World(OPEN)
+    world.reset()
+    for _ in range(15):
+        readings = world.step(3.0, -9.0)
+    assert readings.velocity[0] == pytest.approx(0.5, rel=0.05)
+    assert readings.velocity[1] == pytest.approx(-1.5, rel=0.05)
+
+
+# --- lidar -------------------------------------------------------------------------------------
+
+def _ray_box(ox: float, oy: float, angle: float, box: BoxObstacle) -> float:
+    """Analytic distance along a ray to an oriented box (slab method), inf on a miss."""
+    c, s = math.cos(box.yaw), math.sin(box.yaw)
+    rx, ry = ox - box.x, oy - box.y
+    px, py = c * rx + s * ry, -s * rx + c * ry
+    dx, dy = c * math.cos(angle) + s * math.sin(angle), -s * math.cos(angle) + c * math.sin(angle)
+    near, far = -math.inf, math.inf
+    for pos, d, half in ((px, dx, 0.5 * box.length), (py, dy, 0.5 * box.width)):
+        if abs(d) < 1e-12:
+            if abs(pos) > half:
+                return math.inf
+            continue
+        t1, t2 = (-half - pos) / d, (half - pos) / d
+        near, far = max(near, min(t1, t2)), min(far, max(t1, t2))
+    return near if near <= far and near > 0 else math.inf
+
+
+BOXES = [BoxObstacle(x=7.0, y=5.2, length=0.6, width=1.5), BoxObstacle(x=4.0, y=7.5, length=2.0, width=0.4, yaw=0.3),
+         BoxObstacle(x=2.5, y=3.0, length=0.8, width=0.8, yaw=-0.7)]
+
+
+@pytest.mark.parametrize("yaw, offset", [(0.0, (0.0, 0.0, 0.0)), (0.4, (0.1, -0.05, 0.2))])
+def test_lidar_ranges_match_analytic_distances_to_placed_boxes(yaw, offset):
+    lidar = LidarSpec(beams=36, range_max=5.0, offset=offset)
+    unwalled = OPEN.world.model_copy(update={"walls": False})
+    world = World(scenario(obstacles=BOXES, lidar=lidar, start=(5.0, 5.0, yaw), world=unwalled))
+    readings = world.reset()
+    x, y, heading = readings.pose
+    c, s = math.cos(heading), math.sin(heading)
+    ox, oy = x + c * offset[0] - s * offset[1], y + s * offset[0] + c * offset[1]
+    angles = heading + lidar.beam_angles() + offset[2]
+    expected = [min(min(_ray_box(ox, oy, a, box) for box in BOXES), lidar.range_max) for a in angles]
+    assert readings.lidar.shape == (36,)
+    np.testing.assert_allclose(readings.lidar, expected, atol=2e-3)
+    assert (np.array(expected) < lidar.range_max).sum() >= 8  # the boxes are in view
+
+
+def test_lidar_skips_the_robots_own_links_and_clips_with_noise():
+    world = World(scenario(obstacles=BOXES[:1]))
+    world.reset()
+    spec = LidarSpec(beams=36, range_min=0.3, range_max=2.5, noise_std=0.05)
+    # A scan plane through the middle of the body: every ray starts inside the robot's links.
+    inside = Lidar(spec, world.client, 0.0, np.random.default_rng(0), ROBOT_COLLISION_GROUP)
+    x, y, yaw = world.pose()
+    ranges = inside.scan(x, y, world.robot.link_pose()[0][2], yaw)
+    assert ranges.min() >= 0.3 and ranges.max() <= 2.5
+    hits = ranges < 2.5
+    assert hits.sum() >= 3  # the box 1.7 m ahead
+    assert np.abs(ranges[hits] - 1.7).max() < 0.5
+
+
+def test_lidar_noise_has_the_specified_spread():
+    spec = LidarSpec(beams=36, range_max=5.0, noise_std=0.02)
+    quiet, noisy = (World(scenario(obstacles=BOXES, lidar=spec.model_copy(update={"noise_std": n}))) for n in (0.0, 0.02))
+    truth = quiet.reset().lidar
+    errors = np.concatenate([noisy.reset(seed=k).lidar - truth for k in range(20)])
+    errors = errors[np.abs(errors) > 0]
+    assert np.std(errors) == pytest.approx(0.02, rel=0.15)
+    assert abs(np.mean(errors)) < 0.005
+
+
+# --- camera and IMU ----------------------------------------------------------------------------
+
+def test_camera_images_have_their_shapes_and_depth_in_metres():
+    box = BoxObstacle(x=6.0, y=5.0, length=0.5, width=3.0, height=1.5)  # near face 0.75 m ahead of the centre
+    world = World(scenario(obstacles=[box]), camera=True)
+    camera = world.reset().camera
+    rgb, depth, segmentation = camera["rgb"], camera["depth"], camera["segmentation"]
+    assert rgb.shape == (240, 320, 3) and rgb.dtype == np.uint8
+    assert depth.shape == (240, 320) and depth.dtype == np.float32
+    assert segmentation.shape == (240, 320)
+    assert world.camera.near <= depth.min() and depth.max() <= world.camera.far
+    assert not rgb.flags.writeable  # a snapshot
+    # The camera sits 0.25 m behind the body's centre, pitched 0.3 rad down: its optical axis
+    # meets the box's face 1 m ahead of it, 1 / cos(0.3) m along the axis.
+    assert depth[120, 160] == pytest.approx(1.0 / math.cos(0.3), abs=0.03)
+    tags = world.warehouse.tags
+    assert tags[segmentation[120, 160]].kind == "obstacle"
+    assert segmentation[235, 160] == world.robot.id  # the robot's own body, below and ahead of the camera
+
+
+def test_imu_reads_gravity_at_rest_with_the_specified_noise():
+    world = World(OPEN, seed=0, imu_noise=(0.1, 0.02))
+    world.reset(seed=0)
+    imu = [world.step(0.0, 0.0).imu for _ in range(300)]
+    accel = np.array([r.linear_acceleration for r in imu])
+    gyro = np.array([r.angular_velocity for r in imu])
+    np.testing.assert_allclose(accel.mean(axis=0), (0.0, 0.0, GRAVITY), atol=0.03)
+    np.testing.assert_allclose(gyro.mean(axis=0), 0.0, atol=0.006)
+    np.testing.assert_allclose(accel.std(axis=0), 0.1, rtol=0.2)
+    np.testing.assert_allclose(gyro.std(axis=0), 0.02, rtol=0.2)
+
+
+def test_imu_measures_turn_rate_and_centripetal_acceleration():
+    world = World(OPEN, imu_noise=(0.0, 0.0))
+    world.reset()
+    for _ in range(15):
+        world.step(0.4, 1.0)
+    imu = [world.step(0.4, 1.0).imu for _ in range(10)]
+    assert np.mean([r.angular_velocity[2] for r in imu]) == pytest.approx(1.0, rel=0.05)
+    # Centripetal v·w toward the turn's centre, body +y (the IMU sits at the centre of mass, 4 cm
+    # behind the axle, which adds w²·0.04 along x only), and gravity up.
+    assert np.mean([r.linear_acceleration[1] for r in imu]) == pytest.approx(0.4, rel=0.1)
+    assert np.mean([r.linear_acceleration[2] for r in imu]) == pytest.approx(GRAVITY, abs=0.05)
+
+
+# --- odometry and collisions -------------------------------------------------------------------
+
+def _odometry_error(noise: float, seed: int) -> float:
+    world = World(scenario(robot=ROBOT_PROFILE.model_copy(update={"encoder_noise": noise})))
+    readings = world.reset(seed=seed)
+    for k in range(120):
+        readings = world.step(0.4, 0.6 * math.sin(0.05 * k))
+    return math.dist(readings.pose[:2], readings.odometry.pose[:2])
+
+
+def test_odometry_drift_grows_with_encoder_noise():
+    drift = {noise: np.mean([_odometry_error(noise, seed) for seed in range(3)]) for noise in (0.0, 0.05, 0.2)}
+    assert drift[0.0] < 0.05  # 4.8 m driven: what wheel slip alone leaves
+    assert drift[0.0] < drift[0.05] < drift[0.2]
+
+
+def test_driving_into_a_box_is_a_collision_and_the_floor_is_not():
+    box = BoxObstacle(x=7.0, y=5.0, length=1.0, width=1.0)
+    world = World(scenario(obstacles=[box]))
+    world.reset()
+    for step in range(60):
+        readings = world.step(0.5, 0.0)
+        if readings.collided:
+            break
+    # 1.35 m from the body's front to the box at 0.05 m per step.
+    assert readings.collided and 25 <= step <= 28
+    assert [world.warehouse.tags[body] for body in world.touching()] == [("obstacle", 0)]
+    assert readings.pose.x == pytest.approx(7.0 - 0.5 - 0.15, abs=0.01)
+
+
+def test_walls_bound_the_world():
+    world = World(scenario(start=(9.0, 5.0, 0.0), goal=(1.0, 1.0)))
+    world.reset()
+    collided = [world.step(0.5, 0.0).collided for _ in range(30)]
+    assert any(collided) and world.warehouse.tags[world.touching()[0]].kind == "wall"
+    assert world.pose().x == pytest.approx(10.0 - 0.15, abs=0.01)
+
+
+# --- twin worlds -------------------------------------------------------------------------------
+
+MIXED = scenario(
+    start=(5.0, 5.0, 0.3),
+    obstacles=[
+        CircleObstacle(x=7.0, y=6.0, radius=0.4, height=1.0),
+        BoxObstacle(x=3.0, y=3.5, length=1.2, width=0.5, yaw=0.6),
+        PolygonObstacle(vertices=[(2.0, 6.0), (4.0, 6.0), (4.0, 7.0), (3.0, 7.0), (3.0, 8.5), (2.0, 8.5)]),  # an L
+        SegmentObstacle(points=[(6.0, 2.0), (8.0, 2.5), (8.5, 4.0)]),
+    ])
+
+
+@pytest.mark.parametrize("twin", [MIXED, generate("warehouse", 0, 1.0, "eval", TEMPLATE)], ids=["mixed", "warehouse"])
+def test_the_same_scenario_gives_matching_lidar_scans_in_both_tiers(twin):
+    world = World(twin)
+    rng = np.random.default_rng(0)
+    poses = [twin.start]
+    while len(poses) < 4:  # free poses: clear of every obstacle by the robot's radius
+        x, y = rng.uniform(1.0, 9.0, 2)
+        if twin.signed_distance(np.array([[x, y]]))[0] > 0.3:
+            poses.append((float(x), float(y), float(rng.uniform(-math.pi, math.pi))))
+    for pose in poses:
+        placed = twin.model_copy(update={"start": pose})
+        world.load(placed)
+        scan3d = world.reset().lidar
+        flat = FlatWorld(placed.model_copy(update={"start": tuple(world.pose())}))
+        difference = np.abs(scan3d - flat.reset().lidar)
+        # A 3D segment is a 2 cm thick box: its face is 1 cm nearer than the 2D line, more for a
+        # beam that meets it obliquely. Everything else agrees to the millimetre.
+        assert np.median(difference) < 1e-3 and difference.max() < 0.03
+
+
+IRSIM_WORLD = """\
+world: {height: 10, width: 10, step_time: 0.1}
+robot: {kinematics: {name: diff}, shape: {name: circle, radius: 0.2}, state: [1, 1, 0.5], goal: [9, 9, 0],
+        sensors: [{name: lidar2d, number: 72, range_max: 6, angle_range: 6.283}]}
+obstacle:
+  - {shape: {name: polygon, vertices: [[0, 0], [2, 0], [2, 1], [1, 1], [1, 2], [0, 2]]}, state: [2, 2.5, 0]}
+  - {shape: {name: linestring, vertices: [[0, 0], [1, 1], [2, 0.5]]}, state: [5, 1, 0]}
+  - {number: 4, distribution: {name: circle, radius: 3, center: [5, 5]}, shape: {name: polygon, random_shape: true}}
+"""
+
+
+def test_an_irsim_world_file_is_extruded_to_the_same_layout(tmp_path):
+    path = tmp_path / "world.yaml"
+    path.write_text(IRSIM_WORLD)
+    env = make(world=str(path))
+    env.reset(seed=0)
+    world = env.unwrapped.world
+    # IR-SIM's random polygons are not convex: each becomes several convex prisms.
+    assert len(world.warehouse.bodies("obstacle")) > len(world.scenario.obstacles)
+    flat = FlatWorld(world.scenario.model_copy(update={"start": tuple(world.pose())}))
+    difference = np.abs(world.reset().lidar - flat.reset().lidar)
+    assert world.readings.lidar.shape == (72,) and np.median(difference) < 1e-3 and difference.max() < 0.03
+    env.close()
+
+
+def test_every_obstacle_is_built_to_its_height_and_tagged():
+    twin = generate("warehouse", 0, 1.0, "eval", TEMPLATE)
+    world = World(twin)
+    obstacles = world.warehouse.bodies("obstacle")
+    assert len(twin.obstacles) == 31 and len(obstacles) == 31
+    assert len(world.warehouse.bodies("wall")) == 4
+    for body in obstacles:
+        obstacle = twin.obstacles[world.warehouse.tags[body].index]
+        low, high = p.getAABB(body, physicsClientId=world.client)
+        assert high[2] == pytest.approx(obstacle.height, abs=0.05)
+        assert low[2] == pytest.approx(0.0, abs=0.05)
+
+
+# --- world API, tiers and evaluation -----------------------------------------------------------
+
+def test_control_period_sets_the_substeps_and_time():
+    world = World(OPEN, control_period=0.05)
+    world.reset()
+    assert world.substeps == 12
+    assert world.step(0.3, 0.0).time == pytest.approx(0.05)
+    assert World(OPEN).substeps == 24
+
+
+def test_reset_restores_the_start_and_same_seed_replays_the_world():
+    noisy = scenario(lidar=LidarSpec(noise_std=0.05), robot=ROBOT_PROFILE.model_copy(update={"encoder_noise": 0.05}),
+                     obstacles=BOXES)
+    world = World(noisy)
+
+    def episode(seed: int) -> list:
+        out = [world.reset(seed=seed)]
+        return out + [world.step(0.5, 0.8 * math.sin(0.1 * k)) for k in range(60)]
+
+    first, again, other = episode(1), episode(1), episode(2)
+    assert first[0].pose == pytest.approx(noisy.start, abs=2e-3) and first[0].time == 0.0
+    for a, b in zip(first, again, strict=True):
+        assert a.pose == b.pose and a.odometry == b.odometry and np.array_equal(a.lidar, b.lidar) and a.imu == b.imu
+    assert not np.array_equal(first[10].lidar, other[10].lidar)
+
+
+def test_make_world_and_a_controller_reach_the_goal_in_3d():
+    world = make_world("physics3d", OPEN, seed=0)
+    assert isinstance(world, World)
+    episode = run_episode(make_controller("pid_blend"), OPEN, tier="physics3d", seed=0, max_steps=200)
+    assert episode.outcome == "success"
+
+
+def test_cli_compare_and_eval_run_in_3d(tmp_path, capsys):
+    from stable_baselines3 import PPO
+
+    assert main(["compare", "--world", "physics3d", "--suite", "open", "--episodes", "1", "--controllers", "pid_blend",
+                 "--max-steps", "60", "--out", str(tmp_path / "compare"), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["pid_blend"]["episodes"] == 1
+    untrained = PPO("MlpPolicy", make(world=OPEN), n_steps=64, batch_size=64, device="cpu")
+    manifest = {"algorithm": "ppo", "observation": "lidar43", "goal_distance_scale": 10.0}
+    policy = save_policy(untrained, tmp_path / "p.zip", manifest)
+    assert main(["eval", "--world", "physics3d", "--policy", str(policy), "--suite", "open", "--episodes", "2",
+                 "--max-steps", "30", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["episodes"] == 2
+
+
+def test_bench_measures_the_env_the_bare_loop_and_the_camera():
+    bench = physics3d_bench_scenario()
+    assert bench.robot == ROBOT_PROFILE and len(bench.obstacles) == 31
+    env_rate, resets = physics3d_steps_per_s(bench, steps=100)
+    assert env_rate > 0 and all(0 <= k < 100 for k in resets)
+    assert bare_pybullet_steps_per_s(bench, steps=100, resets=resets) > 0
+    assert camera_fps(bench, frames=3) > 0
+
+
+def test_a_world_disconnects_its_client_on_close():
+    world = World(OPEN)
+    client = world.client
+    world.close()
+    assert not p.isConnected(client)
+
+
+# --- env ---------------------------------------------------------------------------------------
+
+def make(**kwargs):
+    return gym.make("physics3d/WarehouseNav-v0", **kwargs)
+
+
+@pytest.mark.parametrize("kwargs", [{"observation": "lidar43"}, {"observation": "nav7"},
+                                    {"observation": "lidar43", "camera": True}], ids=["lidar43", "nav7", "camera"])
+def test_env_passes_gymnasium_and_sb3_checkers(kwargs):
+    env = make(**kwargs)
+    # The render check opens every render mode, and "human" is the GUI: tested under Xvfb below.
+    check_env(env.unwrapped, skip_render_check=True)
+    sb3_check_env(env.unwrapped, warn=False)
+    env.close()
+
+
+def test_camera_observation_is_a_dict_of_state_and_images():
+    env = make(world=OPEN, camera=True)
+    observation, _ = env.reset(seed=0)
+    assert set(observation) == {"state", "rgb", "depth"}
+    assert observation["rgb"].shape == (240, 320, 3) and observation["depth"].shape == (240, 320, 1)
+    assert env.observation_space.contains(observation)
+    env.close()
+
+
+def _rollout(env, seed: int, steps: int = 150) -> list:
+    observation, _ = env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    trace = [observation]
+    for _ in range(steps):
+        observation, reward, terminated, truncated, _ = env.step(rng.uniform(-1, 1, 2).astype(np.float32))
+        trace.append((observation, reward, terminated, truncated))
+        if terminated or truncated:
+            trace.append(env.reset()[0])
+    return trace
+
+
+def _same(a, b) -> bool:
+    return all(np.array_equal(x[0], y[0]) and x[1:] == y[1:] if isinstance(x, tuple) else np.array_equal(x, y)
+               for x, y in zip(a, b, strict=True))
+
+
+@pytest.mark.parametrize("world", ["warehouse", scenario(obstacles=BOXES, lidar=LidarSpec(noise_std=0.05))],
+                         ids=["generated", "fixed"])
+def test_env_same_seed_same_episodes(world):
+    env = make(world=world)
+    assert _same(_rollout(env, 3), _rollout(env, 3))
+    assert not _same(_rollout(env, 3), _rollout(env, 4))
+    env.close()
+
+
+def test_env_keeps_one_physics_client_across_scenarios():
+    env = make(world="warehouse")
+    env.reset(seed=0)
+    client, first = env.unwrapped.world.client, env.unwrapped.scenario
+    env.reset()
+    assert env.unwrapped.scenario is not first and env.unwrapped.world.client == client
+    env.close()
+
+
+def test_rgb_array_render_is_a_chase_camera_frame():
+    env = make(world=OPEN, render_mode="rgb_array")
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.shape == (360, 480, 3) and frame.dtype == np.uint8 and frame.std() > 10
+    env.close()
+
+
+def test_gui_refuses_to_open_without_a_display(monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    if not sys.platform.startswith("linux"):
+        pytest.skip("the display check is Linux's")
+    with pytest.raises(RuntimeError, match="DISPLAY"):
+        World(OPEN, gui=True)
+
+
+_GUI_SMOKE = textwrap.dedent("""
+    import gymnasium as gym, physics3d
+    env = gym.make("physics3d/WarehouseNav-v0", render_mode="human", control_period=0.025)
+    env.reset(seed=0)
+    for _ in range(25):
+        env.step(env.action_space.sample())
+    assert env.unwrapped._overlay.frames == 26
+    env.close()
+    print("gui ok")
+""")
+
+
+@pytest.mark.slow
+def test_human_render_opens_the_gui_under_xvfb():
+    if shutil.which("Xvfb") is None:
+        pytest.skip("Xvfb is not installed")
+    read, write = os.pipe()
+    server = subprocess.Popen(["Xvfb", "-displayfd", str(write), "-screen", "0", "1024x768x24", "-nolisten", "tcp"],
+                              pass_fds=(write,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(write)
+    try:
+        with os.fdopen(read) as pipe:
+            display = pipe.readline().strip()
+        assert display, "Xvfb did not report a display"
+        env = {**os.environ, "DISPLAY": f":{display}"}
+        result = subprocess.run([sys.executable, "-c", _GUI_SMOKE], env=env, capture_output=True, text=True, timeout=120)
+        assert result.returncode == 0 and "gui ok" in result.stdout, result.stderr[-2000:]
+    finally:
+        server.terminate()
+        server.wait(timeout=10)
