@@ -12,7 +12,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 import yaml
@@ -128,11 +128,92 @@ def planner_figures(scenario: Scenario, resolution: float = 0.2, count: int = 20
             "astar_path_m": metres(astar_m), "rrt_path_m": metres(rrt_m)}
 
 
+def physics3d_bench_scenario() -> Scenario:
+    """The 3D benchmark world: the first ``warehouse`` suite scenario drawn around the 3D robot's template."""
+    from physics3d.robot import TEMPLATE
+
+    return next(SUITES["warehouse"].scenarios(count=1, template=TEMPLATE))
+
+
+def physics3d_steps_per_s(scenario: Scenario, steps: int = 2_000, seed: int = 0) -> tuple[float, list[int]]:
+    """Steps per second of ``gymnasium.make("physics3d/WarehouseNav-v0")`` (lidar43, headless, default
+    control period) under random actions, resetting whenever an episode ends; and the steps after
+    which it reset (the bare loop replays them)."""
+    import gymnasium as gym
+
+    import physics3d  # noqa: F401  (registers the env)
+
+    env = gym.make("physics3d/WarehouseNav-v0", world=scenario, observation="lidar43")
+    actions = np.random.default_rng(seed).uniform(-1.0, 1.0, (steps, 2)).astype(np.float32)
+    resets = []
+    env.reset(seed=seed)
+    start = time.perf_counter()
+    for k, action in enumerate(actions):
+        _, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            env.reset()
+            resets.append(k)
+    elapsed = time.perf_counter() - start
+    env.close()
+    return steps / elapsed, resets
+
+
+def bare_pybullet_steps_per_s(scenario: Scenario, steps: int = 2_000, seed: int = 0, resets: Sequence[int] = ()) -> float:
+    """The same physics with no env around it: per step, the wheel targets of the same random
+    actions, the world's sub-steps and one ``rayTestBatch`` of the lidar's beams; the robot is put
+    back at the start after the steps in ``resets``, so both loops drive the same episodes."""
+    import pybullet as p
+
+    from common.actions import ActionMapping
+    from common.kinematics import wheel_speeds
+    from physics3d.robot import MOTOR_FORCE, WHEEL_BASE, WHEEL_RADIUS, yaw_of
+    from physics3d.world import World
+
+    world = World(scenario, seed=seed)
+    client, robot, substeps, rays = world.client, world.robot, world.substeps, world.lidar.rays
+    mapping = ActionMapping(scenario.robot)
+    actions = np.random.default_rng(seed).uniform(-1.0, 1.0, (steps, 2)).astype(np.float32)
+    targets = [wheel_speeds(*mapping.to_velocity(action), WHEEL_RADIUS, WHEEL_BASE) for action in actions]
+    restart = set(resets)
+    start = time.perf_counter()
+    for k, target in enumerate(targets):
+        p.setJointMotorControlArray(robot.id, robot.wheels, p.VELOCITY_CONTROL, targetVelocities=target,
+                                    forces=(MOTOR_FORCE, MOTOR_FORCE), physicsClientId=client)
+        for _ in range(substeps):
+            p.stepSimulation(physicsClientId=client)
+        (x, y, z), orientation = p.getBasePositionAndOrientation(robot.id, physicsClientId=client)
+        p.rayTestBatch(*rays(x, y, z, yaw_of(orientation)), physicsClientId=client)
+        if k in restart:
+            world.reset()
+    elapsed = time.perf_counter() - start
+    world.close()
+    return steps / elapsed
+
+
+def camera_fps(scenario: Scenario, frames: int = 100) -> float:
+    """Frames per second of the robot's 320 × 240 RGB, depth and segmentation camera (headless,
+    PyBullet's TinyRenderer), the robot driving between frames."""
+    from physics3d.world import World
+
+    world = World(scenario, seed=0, camera=True)
+    world.step(0.2, 0.5)
+    start = time.perf_counter()
+    for _ in range(frames):
+        world.camera.from_mount(*world.robot.camera_pose())
+    elapsed = time.perf_counter() - start
+    world.close()
+    return frames / elapsed
+
+
 def run_benchmarks(steps: int = 20_000) -> dict[str, Any]:
     """All figures of this milestone, as one flat mapping."""
     scenario = bench_scenario()
     flat = flatland_steps_per_s(scenario, steps)
     irsim = irsim_steps_per_s(scenario, max(500, steps // 10))
+    scenario3d = physics3d_bench_scenario()
+    steps3d = max(500, steps // 10)
+    env3d, resets = physics3d_steps_per_s(scenario3d, steps3d)
+    bare3d = bare_pybullet_steps_per_s(scenario3d, steps3d, resets=resets)
     return {
         "world": scenario.name,
         "obstacles": len(scenario.obstacles),
@@ -141,4 +222,8 @@ def run_benchmarks(steps: int = 20_000) -> dict[str, Any]:
         "irsim_steps_per_s": None if irsim is None else round(irsim, 1),
         "flatland_vs_irsim": None if irsim is None else round(flat / irsim, 1),
         **planner_figures(scenario),
+        "physics3d_steps_per_s": round(env3d, 1),
+        "bare_pybullet_steps_per_s": round(bare3d, 1),
+        "physics3d_vs_bare": round(env3d / bare3d, 3),
+        "camera_fps": round(camera_fps(scenario3d), 1),
     }
