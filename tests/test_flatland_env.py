@@ -9,6 +9,7 @@ from gymnasium.utils.env_checker import check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import flatland  # noqa: F401
+from tests.rollouts import rollout, same
 from common.scenario import CircleObstacle, Scenario
 from flatland.world import World
 
@@ -24,39 +25,20 @@ def test_env_passes_gymnasium_and_sb3_checkers(observation):
     sb3_check_env(env.unwrapped)
 
 
-def _rollout(env, seed: int, steps: int = 200) -> list:
-    observation, _ = env.reset(seed=seed)
-    rng = np.random.default_rng(seed)
-    trace = [observation]
-    for _ in range(steps):
-        observation, reward, terminated, truncated, _ = env.step(rng.uniform(-1, 1, 2).astype(np.float32))
-        trace.append((observation, reward, terminated, truncated))
-        if terminated or truncated:
-            trace.append(env.reset()[0])
-    return trace
-
-
-def _same(a, b) -> bool:
-    return all(
-        np.array_equal(x[0], y[0]) and x[1:] == y[1:] if isinstance(x, tuple) else np.array_equal(x, y)
-        for x, y in zip(a, b, strict=True)
-    )
-
-
 @pytest.mark.parametrize("world", ["cluttered", "warehouse"])
 def test_reset_with_the_same_seed_replays_the_same_episodes(world):
     noisy = Scenario().model_copy(update={"lidar": Scenario().lidar.model_copy(update={"noise_std": 0.05})})
     for kwargs in ({"world": world}, {"world": noisy}):
         env = make(observation="lidar43", **kwargs)
-        assert _same(_rollout(env, 3), _rollout(env, 3))
-        assert not _same(_rollout(env, 3), _rollout(env, 4))
+        assert same(rollout(env, 3), rollout(env, 3))
+        assert not same(rollout(env, 3), rollout(env, 4))
 
 
 def test_observations_stay_within_bounds_over_long_random_rollouts():
     for observation in ("nav7", "lidar43"):
         env = make(world="cluttered", observation=observation)
         space = env.observation_space
-        for item in _rollout(env, 0, steps=3000):
+        for item in rollout(env, 0, steps=3000):
             obs = item[0] if isinstance(item, tuple) else item
             assert space.contains(obs), obs
 

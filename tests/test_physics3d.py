@@ -25,6 +25,7 @@ from common.controllers import make_controller
 from common.curriculum.policy import save_policy
 from common.evaluation import run_episode
 from common.generators import generate
+from tests.rollouts import rollout, same
 from common.scenario import BoxObstacle, CircleObstacle, LidarSpec, PolygonObstacle, Scenario, SegmentObstacle
 from common.tiers import make_world
 from flatland.world import World as FlatWorld
@@ -388,29 +389,12 @@ def test_camera_observation_is_a_dict_of_state_and_images():
     env.close()
 
 
-def _rollout(env, seed: int, steps: int = 150) -> list:
-    observation, _ = env.reset(seed=seed)
-    rng = np.random.default_rng(seed)
-    trace = [observation]
-    for _ in range(steps):
-        observation, reward, terminated, truncated, _ = env.step(rng.uniform(-1, 1, 2).astype(np.float32))
-        trace.append((observation, reward, terminated, truncated))
-        if terminated or truncated:
-            trace.append(env.reset()[0])
-    return trace
-
-
-def _same(a, b) -> bool:
-    return all(np.array_equal(x[0], y[0]) and x[1:] == y[1:] if isinstance(x, tuple) else np.array_equal(x, y)
-               for x, y in zip(a, b, strict=True))
-
-
 @pytest.mark.parametrize("world", ["warehouse", scenario(obstacles=BOXES, lidar=LidarSpec(noise_std=0.05))],
                          ids=["generated", "fixed"])
 def test_env_same_seed_same_episodes(world):
     env = make(world=world)
-    assert _same(_rollout(env, 3), _rollout(env, 3))
-    assert not _same(_rollout(env, 3), _rollout(env, 4))
+    assert same(rollout(env, 3, steps=150), rollout(env, 3, steps=150))
+    assert not same(rollout(env, 3, steps=150), rollout(env, 4, steps=150))
     env.close()
 
 
