@@ -13,9 +13,9 @@ import math
 
 import numpy as np
 import pymunk
-import pymunk.autogeometry
 
 from common.kinematics import INTEGRATORS, Pose2D, WheelOdometry, wheel_speeds, wrap_angle
+from common.polygons import convex_pieces
 from common.readings import Imu, Odometry, Readings, frozen
 from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, SegmentObstacle
 from flatland.lidar import Lidar
@@ -23,27 +23,6 @@ from flatland.lidar import Lidar
 GRAVITY = 9.81
 _ROBOT_CATEGORY = 0b10
 _BOX_SEARCH_STEP = 0.01  # m: path resolution when a box footprint's swept bound touches something
-
-
-def _is_convex(vertices: np.ndarray) -> bool:
-    edges = np.roll(vertices, -1, axis=0) - vertices
-    cross = edges[:, 0] * np.roll(edges, -1, axis=0)[:, 1] - edges[:, 1] * np.roll(edges, -1, axis=0)[:, 0]
-    return bool(np.all(cross >= -1e-12) or np.all(cross <= 1e-12))
-
-
-def _polygon_shapes(body: pymunk.Body, vertices: np.ndarray) -> list[pymunk.Shape]:
-    """Convex pieces of a simple polygon (pymunk collides convex shapes only)."""
-    if _is_convex(vertices):
-        return [pymunk.Poly(body, [tuple(v) for v in vertices])]
-    ring = [tuple(v) for v in vertices] + [tuple(vertices[0])]
-    if pymunk.autogeometry.is_closed(ring) and _signed_area(vertices) < 0:
-        ring = ring[::-1]
-    return [pymunk.Poly(body, piece) for piece in pymunk.autogeometry.convex_decomposition(ring, 0.0)]
-
-
-def _signed_area(vertices: np.ndarray) -> float:
-    x, y = vertices[:, 0], vertices[:, 1]
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
 
 
 def _edges(points: np.ndarray, closed: bool) -> np.ndarray:
@@ -105,7 +84,8 @@ class World:
                 ring, closed = np.asarray(obstacle.points, dtype=float), False
             segments.append(_edges(ring, closed))
             if closed:
-                self.space.add(*_polygon_shapes(static, ring))
+                # pymunk collides convex shapes only.
+                self.space.add(*(pymunk.Poly(static, [tuple(v) for v in piece]) for piece in convex_pieces(ring)))
             else:
                 self.space.add(*(pymunk.Segment(static, tuple(a), tuple(b), 0.0) for a, b in zip(ring[:-1], ring[1:])))
         if scenario.world.walls:
