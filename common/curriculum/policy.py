@@ -157,5 +157,10 @@ def load_policy(path: str | Path, device: str = "cpu", name: str | None = None) 
     """A :class:`PolicyAgent` from a policy zip."""
     manifest, normalizer = read_manifest(path)
     model = algorithm_class(manifest["algorithm"]).load(str(path), device=device)
+    if name is None:
+        # A run's files are all called policy/best/last.zip: name those by curriculum and stage.
+        stem = Path(path).stem
+        generic = stem in ("policy", "best", "last") and "curriculum" in manifest
+        name = f"{manifest['curriculum']}/{manifest['stage']}" if generic else stem
     return PolicyAgent(model, manifest["observation"], manifest["goal_distance_scale"], normalizer,
-                       name=name or Path(path).stem, action_mapping=manifest.get("action_mapping", "linear"))
+                       name=name, action_mapping=manifest.get("action_mapping", "linear"))
