@@ -55,12 +55,15 @@ def resolve_device(device: str) -> str:
 
 
 def git_commit() -> str | None:
-    """The project's git commit, or None outside a checkout."""
+    """The project's git commit (with ``-dirty`` when tracked files differ from it), or None outside a checkout."""
+    here = Path(__file__).resolve().parent
     try:
-        return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True,
-                              cwd=Path(__file__).resolve().parent).stdout.strip()
+        commit = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True, cwd=here).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], capture_output=True, text=True,
+                               check=True, cwd=here).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return None
+    return f"{commit}-dirty" if dirty else commit
 
 
 def _write_json(path: Path, data: dict) -> None:
