@@ -27,6 +27,8 @@ from common.scenario import LidarSpec, RobotProfile
 MANIFEST = "nav_manifest.json"
 NORMALIZER = "nav_normalizer.json"
 FORMAT = 1
+_UMASK = os.umask(0)
+os.umask(_UMASK)
 
 
 def algorithm_class(name: str):
@@ -70,6 +72,7 @@ def atomic_write(path: Path, write) -> Path:
     os.close(handle)
     try:
         write(Path(tmp))
+        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600 files; give the usual permissions
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
