@@ -14,6 +14,7 @@ import numpy as np
 from common.errors import ConfigError
 from common.generators import KINDS, generate
 from common.scenario import Scenario
+from common.world_file import read_world_file, world_file_is_random
 
 
 class ScenarioSource(Protocol):
@@ -73,15 +74,12 @@ class FileSource:
     """A world file; redrawn each episode only if it places objects at random (IR-SIM ``distribution``)."""
 
     def __init__(self, path: str | Path) -> None:
-        from common.world_file import read_world_file, world_file_is_random
-
         self.path = Path(path)
         self.random = world_file_is_random(self.path)
-        self._read = read_world_file
         self.scenario = read_world_file(self.path, seed=0)
 
     def draw(self, rng: np.random.Generator) -> Scenario:
-        return self._read(self.path, seed=int(rng.integers(2**31 - 1))) if self.random else self.scenario
+        return read_world_file(self.path, seed=int(rng.integers(2**31 - 1))) if self.random else self.scenario
 
 
 def _kind_source(kind: str, difficulty: float, template: Scenario | None) -> GeneratorSource:

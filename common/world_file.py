@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from common.errors import ConfigError
 from common.scenario import Scenario, read_yaml_mapping, scenario_from_mapping
 
 _IRSIM_ONLY_KEYS = {"obstacle", "gui", "custom", "irsim"}
@@ -41,4 +40,4 @@ def world_file_is_random(path: str | Path) -> bool:
     return has_random_placement(data)
 
 
-__all__ = ["ConfigError", "is_irsim", "read_world_file", "world_file_is_random"]
+__all__ = ["is_irsim", "read_world_file", "world_file_is_random"]
