@@ -17,6 +17,7 @@ from typing import Any, Sequence
 import numpy as np
 import yaml
 
+from common.actions import ActionMapping
 from common.generators import SUITES
 from common.occupancy import OccupancyGrid, scenario_grid
 from common.planners import RRT, AStar, Planner, path_length
@@ -64,9 +65,9 @@ def irsim_steps_per_s(scenario: Scenario, steps: int = 2_000, seed: int = 0) -> 
         return None
     from common.irsim_export import scenario_to_irsim
 
-    robot = scenario.robot
+    mapping = ActionMapping(scenario.robot)  # the env's default mapping: the same commands flatland gets
     actions = np.random.default_rng(seed).uniform(-1.0, 1.0, (steps, 2))
-    commands = np.column_stack([0.5 * (actions[:, 0] + 1.0) * robot.v_max, actions[:, 1] * robot.w_max])
+    commands = np.array([mapping.to_velocity(action) for action in actions])
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "bench_world.yaml"
         path.write_text(yaml.safe_dump(scenario_to_irsim(scenario), sort_keys=False))
@@ -164,7 +165,6 @@ def bare_pybullet_steps_per_s(scenario: Scenario, steps: int = 2_000, seed: int 
     back at the start after the steps in ``resets``, so both loops drive the same episodes."""
     import pybullet as p
 
-    from common.actions import ActionMapping
     from common.kinematics import wheel_speeds
     from physics3d.robot import MOTOR_FORCE, WHEEL_BASE, WHEEL_RADIUS, yaw_of
     from physics3d.world import World

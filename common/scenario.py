@@ -239,7 +239,7 @@ class Scenario(_Frozen):
         return f"[{x0:g}, {x0 + self.world.width:g}] x [{y0:g}, {y0 + self.world.height:g}]"
 
     def to_yaml(self) -> str:
-        """YAML text that :func:`scenario_from_yaml` reads back to an equal scenario."""
+        """YAML text that :func:`load_scenario` reads back to an equal scenario."""
         return yaml.safe_dump(self.model_dump(mode="json"), sort_keys=False)
 
 
@@ -284,14 +284,6 @@ def scenario_from_mapping(data: dict, source: str | Path | None = None) -> Scena
     except ValidationError as exc:
         raise pydantic_error(source, exc) from None
     return scenario.check(source)
-
-
-def scenario_from_yaml(text: str, source: str | Path | None = None) -> Scenario:
-    """Parse scenario YAML text."""
-    data = yaml.safe_load(text)
-    if not isinstance(data, dict):
-        raise ConfigError(source, None, "expected a YAML mapping at the top level")
-    return scenario_from_mapping(data, source)
 
 
 def load_scenario(path: str | Path) -> Scenario:

@@ -34,6 +34,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from common.actions import MAPPINGS
 from common.curriculum.hyperparams import resolve_hyperparams
+from common.curriculum.policy import algorithm_class
 from common.errors import ConfigError
 from common.generators import KINDS, SUITES
 from common.observations import LAYOUTS
@@ -119,12 +120,6 @@ class CurriculumConfig(_Strict):
     stages: Annotated[list[StageSpec], Field(min_length=1)]
 
 
-def _algorithm_class(name: str):
-    from stable_baselines3 import PPO, SAC, TD3
-
-    return {"ppo": PPO, "sac": SAC, "td3": TD3}[name]
-
-
 _MANAGED = {"policy", "env", "seed", "device", "verbose", "tensorboard_log", "_init_setup_model"}
 
 
@@ -135,7 +130,7 @@ def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
         resolve_reward_spec(stage.reward)
     except ConfigError as error:
         raise ConfigError(source, f"{field}.{error.field}", error.problem) from None
-    allowed = set(inspect.signature(_algorithm_class(stage.algorithm).__init__).parameters) - _MANAGED - {"self"}
+    allowed = set(inspect.signature(algorithm_class(stage.algorithm).__init__).parameters) - _MANAGED - {"self"}
     for key in stage.hyperparams:
         if key not in allowed:
             raise ConfigError(source, f"{field}.hyperparams.{key}",
