@@ -26,6 +26,11 @@ idx   meaning                                       min   max
 42    goal distance / goal_distance_scale            0    1
 ====  ===========================================  ====  ===
 
+``lidar43_log``: as ``lidar43``, but each sector reads log(r / r0) / log(range_max / r0), where r0
+is the robot's bounding radius (the range of a return at contact). A linear scale spends a
+twentieth of its span on the last half metre before contact, where the policy has to judge
+clearances to a few centimetres; the log scale spends a quarter on it.
+
 A lidar with other than 36 beams is reduced to 36 sectors of consecutive beams, each reading its
 nearest return. Values are clipped into the bounds (sensor noise may push them out).
 """
@@ -44,7 +49,7 @@ from common.kinematics import wrap_angle
 from common.readings import Readings
 from common.scenario import LidarSpec, RobotProfile
 
-LAYOUTS = ("nav7", "lidar43")
+LAYOUTS = ("nav7", "lidar43", "lidar43_log")
 LIDAR43_BEAMS = 36
 DEFAULT_GOAL_DISTANCE_SCALE = 10.0
 
@@ -90,6 +95,23 @@ def sector_minimum(beams: int, sectors: int) -> Callable[[np.ndarray], np.ndarra
     return lambda ranges: np.minimum.reduceat(ranges, starts)
 
 
+def _linear_ranges(lidar: LidarSpec) -> Callable[[np.ndarray, np.ndarray], None]:
+    inv_r = 1.0 / lidar.range_max
+    return lambda ranges, out: np.multiply(ranges, inv_r, out=out)
+
+
+def _log_ranges(robot: RobotProfile, lidar: LidarSpec) -> Callable[[np.ndarray, np.ndarray], None]:
+    floor = min(robot.bounding_radius, 0.5 * lidar.range_max)
+    scale = 1.0 / math.log(lidar.range_max / floor)
+
+    def encode(ranges: np.ndarray, out: np.ndarray) -> None:
+        # Returns inside the floor (sensor noise, a lidar off the robot's centre) read 0 after clipping.
+        np.log(np.maximum(ranges, floor) * (1.0 / floor), out=out)
+        out *= scale
+
+    return encode
+
+
 def make_layout(
     name: str, robot: RobotProfile, lidar: LidarSpec, goal_distance_scale: float = DEFAULT_GOAL_DISTANCE_SCALE
 ) -> ObservationLayout:
@@ -107,10 +129,11 @@ def make_layout(
             out[5] = readings.lidar.min() * inv_r
             return _clip(out, low, high)
 
-    elif name == "lidar43":
+    elif name in ("lidar43", "lidar43_log"):
         low = np.concatenate([[-1, -1, -1, -1, -1, -1], np.zeros(LIDAR43_BEAMS + 1)]).astype(np.float32)
         high = np.ones(43, dtype=np.float32)
         reduce = sector_minimum(lidar.beams, LIDAR43_BEAMS)
+        encode = _log_ranges(robot, lidar) if name == "lidar43_log" else _linear_ranges(lidar)
 
         def compute(readings: Readings, goal: tuple[float, float]) -> np.ndarray:
             out = np.empty(43, dtype=np.float32)
@@ -118,7 +141,7 @@ def make_layout(
             out[3] = readings.odometry.v * inv_v
             out[4] = readings.odometry.w * inv_w
             out[5] = readings.imu.angular_velocity[2] * inv_w
-            np.multiply(reduce(readings.lidar), inv_r, out=out[6:42])
+            encode(reduce(readings.lidar), out[6:42])
             return _clip(out, low, high)
 
     else:

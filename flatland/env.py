@@ -23,8 +23,9 @@ class NavEnv(NavigationEnv):
     ``action_mapping="rectified"`` makes a[0] <= 0 a stop instead of spreading a[0] linearly.
 
     ## Observation Space
-    ``observation="nav7"`` (default, the tutorial's 7 values) or ``"lidar43"`` (36 lidar sectors);
-    normalised ``Box`` in [-1, 1]; the index tables are in :mod:`common.observations`.
+    ``observation="nav7"`` (default, the tutorial's 7 values), ``"lidar43"`` (36 lidar sectors) or
+    ``"lidar43_log"`` (the same sectors on a log range scale); normalised ``Box`` in [-1, 1]; the
+    index tables are in :mod:`common.observations`.
 
     ## Rewards
     A weighted sum of named terms (:mod:`common.rewards`); ``reward="tutorial2d"`` (default) is the

@@ -10,6 +10,7 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import flatland  # noqa: F401
 from tests.rollouts import rollout, same
+from common.observations import LAYOUTS
 from common.scenario import CircleObstacle, Scenario
 from flatland.world import World
 
@@ -18,7 +19,7 @@ def make(**kwargs):
     return gym.make("flatland/Nav-v0", **kwargs)
 
 
-@pytest.mark.parametrize("observation", ["nav7", "lidar43"])
+@pytest.mark.parametrize("observation", LAYOUTS)
 def test_env_passes_gymnasium_and_sb3_checkers(observation):
     env = make(world="sparse", observation=observation)
     check_env(env.unwrapped)
@@ -35,7 +36,7 @@ def test_reset_with_the_same_seed_replays_the_same_episodes(world):
 
 
 def test_observations_stay_within_bounds_over_long_random_rollouts():
-    for observation in ("nav7", "lidar43"):
+    for observation in LAYOUTS:
         env = make(world="cluttered", observation=observation)
         space = env.observation_space
         for item in rollout(env, 0, steps=3000):

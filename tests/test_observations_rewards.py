@@ -51,7 +51,21 @@ def test_lidar43_reduces_other_beam_counts_to_36_nearest_returns():
     assert sector_minimum(18, 36)(np.arange(18.0)).shape == (36,)
 
 
-@pytest.mark.parametrize("name", ["nav7", "lidar43"])
+def test_lidar43_log_reads_contact_as_0_range_max_as_1_and_keeps_the_other_entries():
+    layout = make_layout("lidar43_log", ROBOT, LidarSpec(range_max=5.0))
+    ranges = np.linspace(0.1, 5.0, 36)
+    obs = layout(_readings(lidar=ranges, w=-1.5), goal=(3.0, 0.0))
+    linear = make_layout("lidar43", ROBOT, LidarSpec(range_max=5.0))(_readings(lidar=ranges, w=-1.5), goal=(3.0, 0.0))
+    np.testing.assert_array_equal(obs[:6], linear[:6])
+    assert obs[42] == linear[42]
+    expected = np.log(np.maximum(ranges, 0.2) / 0.2) / np.log(5.0 / 0.2)
+    np.testing.assert_allclose(obs[6:42], expected, rtol=1e-6)
+    assert obs[6] == 0.0 and obs[41] == pytest.approx(1.0)
+    # A half metre from contact spans more than a quarter of the scale (a twentieth when linear).
+    assert layout(_readings(lidar=np.full(36, 0.7)), goal=(3.0, 0.0))[6] > 0.25
+
+
+@pytest.mark.parametrize("name", ["nav7", "lidar43", "lidar43_log"])
 def test_values_are_clipped_into_the_bounds(name):
     layout = make_layout(name, ROBOT, LidarSpec())
     obs = layout(_readings(v=5.0, w=-9.0, lidar=np.full(36, 7.0)), goal=(100.0, 0.0))

@@ -370,8 +370,9 @@ def make(**kwargs):
     return gym.make("physics3d/WarehouseNav-v0", **kwargs)
 
 
-@pytest.mark.parametrize("kwargs", [{"observation": "lidar43"}, {"observation": "nav7"},
-                                    {"observation": "lidar43", "camera": True}], ids=["lidar43", "nav7", "camera"])
+@pytest.mark.parametrize("kwargs", [{"observation": "lidar43"}, {"observation": "nav7"}, {"observation": "lidar43_log"},
+                                    {"observation": "lidar43", "camera": True}],
+                         ids=["lidar43", "nav7", "lidar43_log", "camera"])
 def test_env_passes_gymnasium_and_sb3_checkers(kwargs):
     env = make(**kwargs)
     # The render check opens every render mode, and "human" is the GUI: tested under Xvfb below.

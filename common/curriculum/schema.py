@@ -8,7 +8,7 @@ stages:
   - name: sparse
     world: flatland      # flatland | physics3d
     scenarios: {kind: sparse, difficulty: 0.5}     # or {suite: NAME} or {file: PATH}
-    observation: lidar43 # nav7 | lidar43
+    observation: lidar43 # nav7 | lidar43 | lidar43_log
     action_mapping: linear  # linear | rectified (common/actions.py)
     reward: tutorial2d   # a preset or {term: weight | {weight, params}}
     max_steps: 300       # episode length
