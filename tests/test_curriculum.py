@@ -88,6 +88,7 @@ def test_run_writes_every_artefact_and_resumes_after_kill(tmp_path):
     manifest, _ = read_manifest(whole / "stages/0-open/policy.zip")
     assert manifest["curriculum"] == "tiny" and manifest["observation"] == "nav7" and manifest["timesteps"] > 0
     assert manifest["final_eval"]["draw"] == "test" and manifest["final_eval"]["episodes"] == 6
+    assert manifest["git_commit"] == run["git_commit"]
 
     killed = tmp_path / "killed"
     process = _run(killed)
@@ -100,9 +101,13 @@ def test_run_writes_every_artefact_and_resumes_after_kill(tmp_path):
     process.wait()
     assert not (killed / "report.md").exists()
     before = (killed / "eval.csv").read_text()
+    # As if commits landed between the kill and the resume: the policies keep the run's start commit.
+    provenance = json.loads((killed / "run.json").read_text())
+    (killed / "run.json").write_text(json.dumps({**provenance, "git_commit": "commit-at-start"}))
     resumed = _run(killed, "--resume")
     assert resumed.wait(timeout=300) == 0, resumed.stdout.read()
     assert _shape(killed) == _shape(whole)
+    assert read_manifest(killed / "stages/1-sparse/policy.zip")[0]["git_commit"] == "commit-at-start"
     rows = list(csv.DictReader((killed / "eval.csv").open()))
     assert (killed / "eval.csv").read_text().startswith(before.splitlines()[0])
     for stage in ("open", "sparse"):

@@ -153,6 +153,7 @@ class Runner:
         self.device = resolve_device(device or config.device)
         self.progress = progress
         self.eval_log: EvalLog | None = None
+        self.commit: str | None = None
 
     def prepare(self) -> dict:
         """Create (or, resuming, reopen) the run directory; return the curriculum state."""
@@ -174,6 +175,9 @@ class Runner:
             state = {"done": [], "stages": {}}
             _write_json(state_path, state)
         self.eval_log = EvalLog(self.out / "eval.csv")
+        # The commit the run started from is the code that trains every stage, even when a
+        # policy is saved (or the run resumed) after later commits.
+        self.commit = json.loads((self.out / "run.json").read_text())["git_commit"]
         return state
 
     def _provenance(self) -> dict:
@@ -296,7 +300,7 @@ def manifest_for(runner: Runner, index: int, stage: StageSpec, timesteps: int, w
     return {"algorithm": stage.algorithm, "observation": stage.observation,
             "goal_distance_scale": DEFAULT_GOAL_DISTANCE_SCALE, "action_mapping": stage.action_mapping,
             "max_steps": stage.max_steps, "curriculum": runner.config.name, "stage": stage.name,
-            "stage_index": index, "seed": runner.config.seed + index, "git_commit": git_commit(),
+            "stage_index": index, "seed": runner.config.seed + index, "git_commit": runner.commit,
             "package_version": common.__version__, "timesteps": timesteps, "wall_time_s": round(wall_time, 1),
             "eval": evaluation}
 
