@@ -28,7 +28,7 @@ idx   meaning                                       min   max
 
 ``lidar43_log``: as ``lidar43``, but each sector reads log(r / r0) / log(range_max / r0), where r0
 is the robot's bounding radius (the range of a return at contact). A linear scale spends a
-twentieth of its span on the last half metre before contact, where the policy has to judge
+tenth of its span on the last half metre before contact, where the policy has to judge
 clearances to a few centimetres; the log scale spends nearly two fifths on it (0.39 with the
 default 0.2 m robot and 5 m lidar).
 

@@ -61,7 +61,7 @@ def test_lidar43_log_reads_contact_as_0_range_max_as_1_and_keeps_the_other_entri
     expected = np.log(np.maximum(ranges, 0.2) / 0.2) / np.log(5.0 / 0.2)
     np.testing.assert_allclose(obs[6:42], expected, rtol=1e-6)
     assert obs[6] == 0.0 and obs[41] == pytest.approx(1.0)
-    # A half metre from contact spans more than a quarter of the scale (a twentieth when linear).
+    # Half a metre from contact spans more than a quarter of the scale (a tenth when linear).
     assert layout(_readings(lidar=np.full(36, 0.7)), goal=(3.0, 0.0))[6] > 0.25
 
 
