@@ -88,7 +88,6 @@ def test_run_writes_every_artefact_and_resumes_after_kill(tmp_path):
     manifest, _ = read_manifest(whole / "stages/0-open/policy.zip")
     assert manifest["curriculum"] == "tiny" and manifest["observation"] == "nav7" and manifest["timesteps"] > 0
     assert manifest["final_eval"]["draw"] == "test" and manifest["final_eval"]["episodes"] == 6
-    assert manifest["git_commit"] == run["git_commit"]
 
     killed = tmp_path / "killed"
     process = _run(killed)
