@@ -2,7 +2,27 @@
 
 from __future__ import annotations
 
+import reprlib
 from pathlib import Path
+from typing import Any
+
+QUOTE_CHARS = 80  # the most of a user's value an error message repeats
+MESSAGE_CHARS = 400  # a safety net: no message, however built, floods a terminal
+
+_short = reprlib.Repr()  # Python 3.11's Repr takes no keyword arguments
+_short.maxlevel, _short.maxdict, _short.maxlist, _short.maxtuple, _short.maxset = 2, 4, 4, 4, 4
+_short.maxstring = _short.maxother = QUOTE_CHARS - 2
+_short.maxlong = 40
+
+
+def quote(value: Any) -> str:
+    """``repr(value)`` cut to about :data:`QUOTE_CHARS` characters, cheap even for huge or shared structures."""
+    text = " ".join(_short.repr(value).split())  # one line, even for a numpy array's repr
+    return text if len(text) <= QUOTE_CHARS else text[: QUOTE_CHARS - 3] + "..."
+
+
+class ScenarioWarning(UserWarning):
+    """A world file that runs, but probably not as its author meant (IR-SIM runs such files too)."""
 
 
 class ConfigError(ValueError):
@@ -16,7 +36,10 @@ class ConfigError(ValueError):
         self.field = field
         self.problem = problem
         parts = [p for p in (self.source, self.field) if p]
-        super().__init__(": ".join([*parts, problem]))
+        message = " ".join(": ".join([*parts, problem]).split())  # one line, whatever the parts held
+        if len(message) > MESSAGE_CHARS:
+            message = message[: MESSAGE_CHARS - 3] + "..."
+        super().__init__(message)
 
     def with_source(self, source: str | Path) -> "ConfigError":
         """The same error, attributed to ``source`` (for loaders that parse text before knowing its file)."""

@@ -15,7 +15,7 @@ from typing import Callable, Iterator, Literal
 
 import numpy as np
 
-from common.errors import ConfigError
+from common.errors import ConfigError, quote
 from common.occupancy import goal_reachable
 from common.scenario import BoxObstacle, CircleObstacle, Obstacle, Scenario
 
@@ -197,7 +197,7 @@ def generate(kind: str, seed: int, difficulty: float = 0.5, split: Split = "trai
     walled world, a 0.2 m circular robot with v_max 1 m/s, w_max 1 rad/s, a 36-beam 5 m lidar).
     """
     if kind not in _GENERATORS:
-        raise ConfigError(None, "kind", f"unknown scenario kind {kind!r}; allowed: {', '.join(KINDS)}")
+        raise ConfigError(None, "kind", f"unknown scenario kind {quote(kind)}; allowed: {', '.join(KINDS)}")
     if not 0.0 <= difficulty <= 1.0:
         raise ConfigError(None, "difficulty", f"{difficulty} is outside [0, 1]")
     template = template or Scenario()
@@ -249,4 +249,4 @@ def get_suite(name: str) -> Suite:
     try:
         return SUITES[name]
     except KeyError:
-        raise ConfigError(None, "suite", f"unknown suite {name!r}; allowed: {', '.join(SUITES)}") from None
+        raise ConfigError(None, "suite", f"unknown suite {quote(name)}; allowed: {', '.join(SUITES)}") from None

@@ -33,8 +33,10 @@ from typing import Any, NamedTuple
 import numpy as np
 from pydantic import BaseModel, ValidationError
 
-from common.errors import ConfigError
+from common.errors import ConfigError, quote
+from common.polygons import is_simple_polygon
 from common.scenario import (
+    MAX_OBSTACLES,
     BoxObstacle,
     LidarSpec,
     PolygonObstacle,
@@ -78,7 +80,12 @@ SHAPE_KEYS = {
 OBSTACLE_SHAPES = ("circle", "rectangle", "polygon", "linestring")
 ROBOT_SHAPES = ("circle", "rectangle")  # the footprints RobotProfile can express
 DISTRIBUTION_KEYS = ("name", "range_low", "range_high", "min_distance", "radius", "center", "3d")
-MAX_OBJECTS, MAX_VERTICES, MAX_BEAMS = 1000, 1000, 4096  # sanity caps (IR-SIM has none)
+# What one file may cost (IR-SIM has no caps): a shared file must be answered quickly, whatever it holds.
+MAX_OBJECTS = MAX_OBSTACLES + 1  # robots and obstacles, after ``number`` fan-out, across the file
+MAX_VERTICES = 1000  # per polygon
+MAX_TOTAL_VERTICES = 20_000  # across the file (simplicity checks cost the square of a polygon's vertices)
+MAX_PLACEMENT_CHECKS = 10_000_000  # candidate-to-placed distance checks of random placement, across the file
+MAX_BEAMS = 4096
 CIRCLE_SEGMENTS = 64  # shapely's Point.buffer default: 16 segments per quarter circle
 _MARGIN = 0.5  # IR-SIM keeps default random and circle placements this far inside the world
 
@@ -104,6 +111,24 @@ class _Shape(NamedTuple):
 Entry = dict[str, _Value]  # one object's keys after IR-SIM's per-object fan-out
 
 
+class _Draws:
+    """The file's random generator, and what placing and shaping its objects may still cost."""
+
+    def __init__(self, seed: int | None) -> None:
+        self.rng = np.random.default_rng(seed)
+        self._left = {"objects": MAX_OBJECTS, "vertices": MAX_TOTAL_VERTICES, "checks": MAX_PLACEMENT_CHECKS}
+
+    def spend(self, what: str, amount: int, path: str, advice: str) -> None:
+        """Take ``amount`` of ``what`` from the budget, or fail naming ``path``."""
+        self._left[what] -= amount
+        if self._left[what] < 0:
+            raise _fail(path, f"the file needs more than {_LIMITS[what]} in all; allowed: {advice}")
+
+
+_LIMITS = {"objects": f"{MAX_OBJECTS:,} objects", "vertices": f"{MAX_TOTAL_VERTICES:,} polygon vertices",
+           "checks": f"{MAX_PLACEMENT_CHECKS:,} random-placement spacing checks"}
+
+
 def _fail(path: str | None, problem: str) -> ConfigError:
     # Raised without a source; parse_irsim attributes every error to the file at the end.
     return ConfigError(None, path, problem)
@@ -123,10 +148,10 @@ def _is_number(value: Any) -> bool:
 def _number(value: Any, path: str, low: float | None = None, strict: bool = False, allow_inf: bool = False) -> float:
     """A real number, finite unless ``allow_inf``, optionally bounded below (``strict``: exclusive)."""
     if not _is_number(value) or math.isnan(value):
-        raise _fail(path, f"expected a number (got {value!r})")
+        raise _fail(path, f"expected a number (got {quote(value)})")
     value = float(value)
     if math.isinf(value) and not allow_inf:
-        raise _fail(path, f"expected a finite number (got {value!r})")
+        raise _fail(path, f"expected a finite number (got {quote(value)})")
     if low is not None and (value <= low if strict else value < low):
         raise _fail(path, f"must be {'>' if strict else '>='} {low:g} (got {value:g})")
     return value
@@ -134,7 +159,7 @@ def _number(value: Any, path: str, low: float | None = None, strict: bool = Fals
 
 def _integer(value: Any, path: str, low: int, high: int) -> int:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise _fail(path, f"expected an integer (got {value!r})")
+        raise _fail(path, f"expected an integer (got {quote(value)})")
     if not low <= value <= high:
         raise _fail(path, f"must be >= {low} and <= {high} (got {value})")
     return int(value)
@@ -142,15 +167,15 @@ def _integer(value: Any, path: str, low: int, high: int) -> int:
 
 def _flag(value: Any, path: str) -> bool:
     if not isinstance(value, bool):
-        raise _fail(path, f"expected true or false (got {value!r})")
+        raise _fail(path, f"expected true or false (got {quote(value)})")
     return value
 
 
 def _text(value: Any, path: str, allowed: tuple[str, ...] | None = None) -> str:
     if not isinstance(value, str):
-        raise _fail(path, f"expected a string (got {value!r})")
+        raise _fail(path, f"expected a string (got {quote(value)})")
     if allowed is not None and value not in allowed:
-        raise _fail(path, f"unsupported value {value!r}; allowed: {', '.join(allowed)}")
+        raise _fail(path, f"unsupported value {quote(value)}; allowed: {', '.join(allowed)}")
     return value
 
 
@@ -158,7 +183,7 @@ def _vector(value: Any, path: str, size: int | None = None, min_size: int = 0, a
     """A list of numbers, of exactly ``size`` entries or at least ``min_size``."""
     wanted = f"{size} numbers" if size is not None else f"at least {min_size} numbers" if min_size else "numbers"
     if not isinstance(value, (list, tuple)) or (size is not None and len(value) != size) or len(value) < min_size:
-        raise _fail(path, f"expected a list of {wanted} (got {value!r})")
+        raise _fail(path, f"expected a list of {wanted} (got {quote(value)})")
     return [_number(v, f"{path}[{i}]", allow_inf=allow_inf) for i, v in enumerate(value)]
 
 
@@ -172,13 +197,13 @@ def _bounds(low: list[float], high: list[float], path: str) -> None:
 def _points(value: Any, path: str, min_count: int) -> np.ndarray:
     """A list of at least ``min_count`` [x, y] points, as an (N, 2) array."""
     if not isinstance(value, (list, tuple)) or len(value) < min_count:
-        raise _fail(path, f"expected a list of at least {min_count} [x, y] points (got {value!r})")
+        raise _fail(path, f"expected a list of at least {min_count} [x, y] points (got {quote(value)})")
     return np.array([_vector(p, f"{path}[{i}]", size=2) for i, p in enumerate(value)], dtype=float)
 
 
 def _mapping(value: Any, path: str) -> dict:
     if not isinstance(value, dict):
-        raise _fail(path, f"expected a mapping (got {value!r})")
+        raise _fail(path, f"expected a mapping (got {quote(value)})")
     return value
 
 
@@ -243,7 +268,7 @@ def _groups(value: Any, path: str) -> list[tuple[dict, str]]:
     if isinstance(value, dict):
         return [(value, path)]
     if not isinstance(value, list):
-        raise _fail(path, f"expected a mapping or a list of mappings (got {value!r})")
+        raise _fail(path, f"expected a mapping or a list of mappings (got {quote(value)})")
     return [(_mapping(group, f"{path}[{i}]"), f"{path}[{i}]") for i, group in enumerate(value)]
 
 
@@ -266,32 +291,45 @@ def _sensor_fan_out(value: Any, number: int, path: str) -> list[_Value]:
     return _fan_out(value, number, path)
 
 
-def _random_points(rng: np.random.Generator, low: list[float], high: list[float], number: int,
-                   min_distance: float) -> list[list[float]]:
+def _random_points(draws: _Draws, low: list[float], high: list[float], number: int,
+                   min_distance: float, path: str) -> list[list[float]]:
     """IR-SIM's rejection sampling: up to 1000 draws per point for an xy spacing of ``min_distance``;
-    when all fail the last draw is kept."""
+    when all fail the last draw is kept. Spacing checks count against the file's budget, so an
+    impossible spacing is an error within a fraction of a second rather than minutes of draws."""
     tries = 1000
+    rng = draws.rng
+    low3, high3 = low[:3], high[:3]
     points = np.zeros((number, 3))
+    advice = "a smaller min_distance, fewer objects or a wider range"
     for i in range(number):
-        # All tries are drawn at once, then the generator is rewound and advanced by exactly the
-        # draws IR-SIM's one-at-a-time loop would have made, so the random stream stays identical.
-        saved = rng.bit_generator.state
-        candidates = rng.uniform(low[:3], high[:3], size=(tries, 3))
-        chosen = 0 if i == 0 else tries - 1
-        for start in range(0, tries if i > 0 else 0, 50):
-            chunk = candidates[start:start + 50]
+        # IR-SIM draws one candidate at a time; drawing k at once yields the same numbers, so
+        # candidates come in chunks growing fourfold, and after an acceptance the generator is
+        # rewound and advanced by exactly the draws IR-SIM's loop would have made.
+        start, size = 0, 1
+        while True:
+            size = min(size, tries - start)
+            saved = rng.bit_generator.state
+            chunk = rng.uniform(low3, high3, size=(size, 3))
+            if i == 0:
+                points[0] = chunk[0]
+                break
+            draws.spend("checks", size * i, path, advice)
             gaps = np.hypot(chunk[:, None, 0] - points[None, :i, 0], chunk[:, None, 1] - points[None, :i, 1])
             accepted = np.flatnonzero(gaps.min(axis=1) >= min_distance)
-            if accepted.size:
-                chosen = start + int(accepted[0])
+            start += size
+            if accepted.size or start >= tries:
+                # Accepted, or every try failed and the last draw is kept.
+                k = int(accepted[0]) if accepted.size else size - 1
+                if k < size - 1:
+                    rng.bit_generator.state = saved
+                    rng.uniform(low3, high3, size=(k + 1, 3))
+                points[i] = chunk[k]
                 break
-        rng.bit_generator.state = saved
-        rng.uniform(low[:3], high[:3], size=(chosen + 1, 3))
-        points[i] = candidates[chosen]
+            size *= 4
     return points.tolist()
 
 
-def _placements(group: dict, number: int, path: str, rng: np.random.Generator,
+def _placements(group: dict, number: int, path: str, draws: _Draws,
                 world: WorldSpec) -> tuple[list[_Value], list[_Value]]:
     """States and goals of a group's objects, by its ``distribution``."""
     dist_path = _join(path, "distribution")
@@ -316,8 +354,8 @@ def _placements(group: dict, number: int, path: str, rng: np.random.Generator,
         high = _vector(distribution.get("range_high", default_high), at("range_high"), min_size=3)
         _bounds(low[:3], high[:3], at("range_high"))
         spacing = _number(distribution.get("min_distance", 1.0), at("min_distance"))
-        states = _random_points(rng, low, high, number, spacing)
-        goals = _random_points(rng, low, high, number, spacing)
+        states = _random_points(draws, low, high, number, spacing, at("min_distance"))
+        goals = _random_points(draws, low, high, number, spacing, at("min_distance"))
         return [_Value(s, dist_path) for s in states], [_Value(g, dist_path) for g in goals]
     radius = _number(distribution.get("radius", min(width, height) / 2 - _MARGIN), at("radius"))
     cx, cy = _vector(distribution.get("center", [x0 + width / 2, y0 + height / 2]), at("center"), min_size=2)[:2]
@@ -331,11 +369,12 @@ def _placements(group: dict, number: int, path: str, rng: np.random.Generator,
     return states, goals
 
 
-def _expand(group: dict, path: str, rng: np.random.Generator, world: WorldSpec) -> list[Entry]:
+def _expand(group: dict, path: str, draws: _Draws, world: WorldSpec) -> list[Entry]:
     """One entry per object of a group, every key resolved to that object's value."""
     _check_keys(group, OBJECT_KEYS, path)
     number = _integer(group.get("number", 1), _join(path, "number"), 0, MAX_OBJECTS)
-    states, goals = _placements(group, number, path, rng, world)
+    draws.spend("objects", number, _join(path, "number"), "fewer objects")
+    states, goals = _placements(group, number, path, draws, world)
     entries: list[Entry] = [{"state": states[i], "goal": goals[i]} for i in range(number)]
     for key, value in group.items():
         if key in ("number", "distribution", "state", "goal"):
@@ -372,8 +411,8 @@ def _goal(entry: Entry) -> tuple[float, float]:
 # -- shapes ----------------------------------------------------------------------------------------
 
 
-def _shape(item: _Value, rng: np.random.Generator, allowed: tuple[str, ...]) -> _Shape:
-    """An IR-SIM ``shape`` mapping as a body-frame outline; draws random shapes from ``rng``."""
+def _shape(item: _Value, draws: _Draws, allowed: tuple[str, ...]) -> _Shape:
+    """An IR-SIM ``shape`` mapping as a body-frame outline; draws random shapes from the file's generator."""
     if item.value is None:
         # IR-SIM's fallback for an object without a shape (it logs a warning).
         return _Shape("circle", np.zeros((1, 2)), radius=1.0)
@@ -381,7 +420,7 @@ def _shape(item: _Value, rng: np.random.Generator, allowed: tuple[str, ...]) -> 
     at = lambda key: _join(item.path, key)  # noqa: E731
     name = _text(shape.get("name", "circle"), at("name")).lower()
     if name not in allowed:
-        raise _fail(at("name"), f"unsupported shape {name!r}; allowed: {', '.join(allowed)}")
+        raise _fail(at("name"), f"unsupported shape {quote(name)}; allowed: {', '.join(allowed)}")
     _check_keys(shape, SHAPE_KEYS[name], item.path)
     # An Ackermann wheelbase moves the outline forward by half of it, as in IR-SIM.
     shift = 0.5 * _number(shape["wheelbase"], at("wheelbase"), 0) if shape.get("wheelbase") is not None else 0.0
@@ -391,7 +430,7 @@ def _shape(item: _Value, rng: np.random.Generator, allowed: tuple[str, ...]) -> 
         if random_shape:
             low, high = _vector(shape.get("radius_range", [0.1, 1.0]), at("radius_range"), size=2)
             _bounds([low], [high], at("radius_range"))
-            radius = float(rng.uniform(low, high))
+            radius = float(draws.rng.uniform(low, high))
             if radius <= 0:
                 raise _fail(at("radius_range"), f"must give radii > 0 (drew {radius:g})")
         else:
@@ -407,11 +446,13 @@ def _shape(item: _Value, rng: np.random.Generator, allowed: tuple[str, ...]) -> 
     else:
         vertices = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])  # IR-SIM's default square
     if random_shape:
-        vertices = _random_polygon(shape, item.path, rng, default_convex=name == "linestring")
+        vertices = _random_polygon(shape, item.path, draws, default_convex=name == "linestring")
+    else:
+        draws.spend("vertices", len(vertices), _join(item.path, "vertices"), "fewer or simpler polygons")
     return _Shape(name, vertices)
 
 
-def _random_polygon(shape: dict, path: str, rng: np.random.Generator, default_convex: bool) -> np.ndarray:
+def _random_polygon(shape: dict, path: str, draws: _Draws, default_convex: bool) -> np.ndarray:
     """A random star-shaped polygon, drawn in IR-SIM's order: centre, mean radius, irregularity,
     spikiness, vertex count, angle steps, start angle, then one radius per vertex."""
     at = lambda key: _join(path, key)  # noqa: E731
@@ -427,14 +468,16 @@ def _random_polygon(shape: dict, path: str, rng: np.random.Generator, default_co
     _bounds(spike_range[:1], spike_range[1:], at("spikeyness_range"))
     count_range = shape.get("num_vertices_range", [4, 10])
     if not isinstance(count_range, list) or len(count_range) != 2:
-        raise _fail(at("num_vertices_range"), f"expected a list of 2 integers (got {count_range!r})")
+        raise _fail(at("num_vertices_range"), f"expected a list of 2 integers (got {quote(count_range)})")
     low_count = _integer(count_range[0], at("num_vertices_range") + "[0]", 3, MAX_VERTICES - 1)
     high_count = _integer(count_range[1], at("num_vertices_range") + "[1]", low_count + 1, MAX_VERTICES)
+    rng = draws.rng
     center = rng.uniform(low=center_range[0:2], high=center_range[2:], size=(1, 2))[0]
     avg_radius = float(rng.uniform(low=radius_range[0], high=radius_range[1], size=(1,))[0])
     irregularity = float(rng.uniform(low=irregularity_range[0], high=irregularity_range[1], size=(1,))[0])
     spikiness = float(rng.uniform(low=spike_range[0], high=spike_range[1], size=(1,))[0])
     count = int(rng.integers(low=low_count, high=high_count, size=(1,))[0])
+    draws.spend("vertices", count, at("num_vertices_range"), "fewer or simpler polygons")
     if not (0 <= irregularity <= 1 and 0 <= spikiness <= 1) or avg_radius <= 0:
         raise _fail(path, "random polygon ranges must give irregularity and spikeyness in [0, 1] and radii > 0")
     spread = irregularity * 2 * math.pi / count
@@ -460,38 +503,6 @@ def circle_vertices(cx: float, cy: float, radius: float) -> np.ndarray:
     """The 64-gon shapely's ``Point(cx, cy).buffer(radius)`` gives: from (cx + r, cy), clockwise."""
     angles = -2.0 * np.pi * np.arange(CIRCLE_SEGMENTS) / CIRCLE_SEGMENTS
     return np.column_stack((cx + radius * np.cos(angles), cy + radius * np.sin(angles)))
-
-
-def _orientation(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
-    return float((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
-
-
-def _segments_meet(p1: np.ndarray, p2: np.ndarray, q1: np.ndarray, q2: np.ndarray) -> bool:
-    """Whether two closed segments share a point (touching counts)."""
-    d1, d2 = _orientation(q1, q2, p1), _orientation(q1, q2, p2)
-    d3, d4 = _orientation(p1, p2, q1), _orientation(p1, p2, q2)
-    if ((d1 > 0) != (d2 > 0)) and ((d3 > 0) != (d4 > 0)) and 0 not in (d1, d2, d3, d4):
-        return True
-
-    def on(a: np.ndarray, b: np.ndarray, p: np.ndarray, d: float) -> bool:
-        return d == 0 and min(a[0], b[0]) <= p[0] <= max(a[0], b[0]) and min(a[1], b[1]) <= p[1] <= max(a[1], b[1])
-
-    return on(q1, q2, p1, d1) or on(q1, q2, p2, d2) or on(p1, p2, q1, d3) or on(p1, p2, q2, d4)
-
-
-def is_simple_polygon(vertices: np.ndarray) -> bool:
-    """Whether the closed ring has area and no edge meets a non-adjacent edge (shapely's validity)."""
-    n = len(vertices)
-    x, y = vertices[:, 0], vertices[:, 1]
-    if n < 3 or abs(float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))) < 1e-12:
-        return False
-    for i in range(n):
-        for j in range(i + 1, n):
-            if j == i + 1 or (i == 0 and j == n - 1):
-                continue
-            if _segments_meet(vertices[i], vertices[(i + 1) % n], vertices[j], vertices[(j + 1) % n]):
-                return False
-    return True
 
 
 def _polygon_ring(vertices: np.ndarray, path: str) -> np.ndarray:
@@ -546,7 +557,7 @@ def _check_diff_drive(entry: Entry, path: str) -> None:
     kinematics = _mapping(item.value, item.path)
     name = kinematics.get("name")
     if not isinstance(name, str) or name.lower() != "diff":
-        raise _fail(item.path, f"unsupported kinematics {name!r} for the controlled robot; {allowed}")
+        raise _fail(item.path, f"unsupported kinematics {quote(name)} for the controlled robot; {allowed}")
     _check_keys(kinematics, DIFF_KINEMATICS_KEYS, item.path)
     if _flag(kinematics.get("noise", False), _join(item.path, "noise")):
         raise _fail(_join(item.path, "noise"), "motion noise is not modelled; allowed: false")
@@ -590,7 +601,7 @@ def _lidar(entry: Entry, path: str) -> LidarSpec:
     """The first lidar2d sensor as a LidarSpec (IR-SIM's lidar2d defaults when there is none)."""
     item = _get(entry, "sensors", [], path)
     if not isinstance(item.value, list):
-        raise _fail(item.path, f"expected a list of sensor mappings (got {item.value!r})")
+        raise _fail(item.path, f"expected a list of sensor mappings (got {quote(item.value)})")
     sensor, sensor_path = {}, item.path
     for i, candidate in enumerate(item.value):
         candidate_path = f"{item.path}[{i}]"
@@ -618,13 +629,16 @@ def _lidar(entry: Entry, path: str) -> LidarSpec:
     return _build(LidarSpec, sensor_path, fields)
 
 
-def _static_obstacle(entry: Entry, path: str, rng: np.random.Generator, allowed: tuple[str, ...]) -> Any:
+def _static_obstacle(entry: Entry, path: str, draws: _Draws, allowed: tuple[str, ...]) -> Any:
     """Any object other than the controlled robot: a static obstacle at its initial state."""
     _kinematics_name(entry, path)
     item = _get(entry, "shape", None, path)
-    shape = _shape(item, rng, allowed)
+    shape = _shape(item, draws, allowed)
     unobstructed = _flag(_get(entry, "unobstructed", False, path).value, _join(path, "unobstructed"))
-    return _obstacle(shape, _state(entry), unobstructed, item.path)
+    try:
+        return _obstacle(shape, _state(entry), unobstructed, item.path)
+    except ValidationError as exc:
+        raise _fail(item.path, pydantic_error(None, exc).problem) from None
 
 
 def _parse(data: dict, source: str | Path | None, seed: int | None) -> Scenario:
@@ -635,24 +649,24 @@ def _parse(data: dict, source: str | Path | None, seed: int | None) -> Scenario:
     for key in data:
         if key not in TOP_KEYS:
             raise _fail(f"{prefix}{key}", f"unknown key; allowed: {', '.join(TOP_KEYS)}")
-    rng = np.random.default_rng(seed)
+    draws = _Draws(seed)
     world, name = _world(data.get("world"), f"{prefix}world")
     obstacles: list[Any] = []
     robot = None
     for group, path in _groups(data.get("robot"), f"{prefix}robot"):
-        for entry in _expand(group, path, rng, world):
+        for entry in _expand(group, path, draws, world):
             # Shapes are read in creation order, so random radii draw from rng as IR-SIM does.
             if robot is None:
                 _check_diff_drive(entry, path)
-                shape = _shape(_get(entry, "shape", None, path), rng, ROBOT_SHAPES)
+                shape = _shape(_get(entry, "shape", None, path), draws, ROBOT_SHAPES)
                 robot = (entry, path, shape)
             else:
-                obstacles.append(_static_obstacle(entry, path, rng, OBSTACLE_SHAPES))
+                obstacles.append(_static_obstacle(entry, path, draws, OBSTACLE_SHAPES))
     if robot is None:
         raise _fail(f"{prefix}robot", "no robot defined; allowed: at least one robot with kinematics {name: diff}")
     for group, path in _groups(data.get("obstacle"), f"{prefix}obstacle"):
-        for entry in _expand(group, path, rng, world):
-            obstacles.append(_static_obstacle(entry, path, rng, OBSTACLE_SHAPES))
+        for entry in _expand(group, path, draws, world):
+            obstacles.append(_static_obstacle(entry, path, draws, OBSTACLE_SHAPES))
     entry, path, shape = robot
     threshold = _get(entry, "goal_threshold", 0.1, path)
     fields = {

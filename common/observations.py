@@ -45,7 +45,7 @@ from typing import Callable
 import numpy as np
 from gymnasium import spaces
 
-from common.errors import ConfigError
+from common.errors import ConfigError, quote
 from common.kinematics import wrap_angle
 from common.readings import Readings
 from common.scenario import LidarSpec, RobotProfile
@@ -146,5 +146,5 @@ def make_layout(
             return _clip(out, low, high)
 
     else:
-        raise ConfigError(None, "observation", f"unknown layout {name!r}; allowed: {', '.join(LAYOUTS)}")
+        raise ConfigError(None, "observation", f"unknown layout {quote(name)}; allowed: {', '.join(LAYOUTS)}")
     return ObservationLayout(name, spaces.Box(low, high, dtype=np.float32), compute)

@@ -15,7 +15,7 @@ import math
 from pathlib import Path
 from typing import Any, Callable, Mapping, NamedTuple
 
-from common.errors import ConfigError
+from common.errors import ConfigError, quote
 
 
 class StepContext(NamedTuple):
@@ -163,7 +163,7 @@ def resolve_reward_spec(spec: str | Mapping[str, Any], source: str | Path | None
     """Validate a reward spec and return it as term -> {weight, **params}."""
     if isinstance(spec, str):
         if spec not in PRESETS:
-            raise ConfigError(source, "reward", f"unknown preset {spec!r}; allowed: {', '.join(PRESETS)} or a mapping of term -> weight")
+            raise ConfigError(source, "reward", f"unknown preset {quote(spec)}; allowed: {', '.join(PRESETS)} or a mapping of term -> weight")
         spec = PRESETS[spec]
     if not isinstance(spec, Mapping) or not spec:
         raise ConfigError(source, "reward", "expected a preset name or a non-empty mapping of term -> weight")
@@ -175,7 +175,7 @@ def resolve_reward_spec(spec: str | Mapping[str, Any], source: str | Path | None
         entry = {"weight": entry} if not isinstance(entry, Mapping) else dict(entry)
         weight = entry.get("weight")
         if isinstance(weight, bool) or not isinstance(weight, (int, float)) or not math.isfinite(weight):
-            raise ConfigError(source, f"{field}.weight", f"expected a finite number, got {weight!r}")
+            raise ConfigError(source, f"{field}.weight", f"expected a finite number, got {quote(weight)}")
         allowed = [p for p in inspect.signature(TERMS[name]).parameters if p != "ctx"]
         for param in entry:
             if param != "weight" and param not in allowed:

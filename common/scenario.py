@@ -3,6 +3,12 @@
 A :class:`Scenario` is an immutable, validated pydantic model, so the same class is the runtime
 object, the YAML schema and the source of one-line error messages. Lengths in metres, angles in
 radians, world frame x right, y up, yaw counter-clockwise.
+
+Every number is range-checked before anything uses it (files are shared between people, and a
+radius of 1e300 must be a one-line error, not a crash deep in a physics engine): finite values,
+coordinates within :data:`MAX_COORDINATE` m, lengths up to :data:`MAX_LENGTH` m (a 1 km world),
+speeds up to :data:`MAX_SPEED`, at most :data:`MAX_OBSTACLES` obstacles of at most
+:data:`MAX_VERTICES` vertices, and no obstacle or robot wider than the world's diagonal.
 """
 
 from __future__ import annotations
@@ -13,28 +19,42 @@ from typing import Annotated, Literal, Union
 
 import numpy as np
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from common import geometry
-from common.errors import ConfigError
+from common.errors import ConfigError, quote
 from common.kinematics import Pose2D
+from common.polygons import is_simple_polygon
+from common.yaml_io import read_yaml_mapping
 
-Point = tuple[float, float]
-NonNegativeFloat = Annotated[float, Field(ge=0.0)]
+MAX_LENGTH = 1000.0  # m: world sides, obstacle and robot sizes, lidar range
+MAX_COORDINATE = 10_000.0  # m: any position
+MAX_SPEED = 100.0  # m/s and rad/s
+MAX_OBSTACLES = 2000
+MAX_VERTICES = 1000
+
+Coordinate = Annotated[float, Field(ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
+Point = tuple[Coordinate, Coordinate]
+Length = Annotated[float, Field(gt=0.0, le=MAX_LENGTH)]
+NonNegativeLength = Annotated[float, Field(ge=0.0, le=MAX_LENGTH)]
+Angle = Annotated[float, Field(ge=-1000.0, le=1000.0)]  # rad: any finite heading a person would write
+Speed = Annotated[float, Field(ge=-MAX_SPEED, le=MAX_SPEED)]
+Acceleration = Annotated[float, Field(gt=0.0, allow_inf_nan=True)]  # inf: no limit, IR-SIM's default
+Fraction = Annotated[float, Field(ge=0.0, le=1.0)]
 
 
 class _Frozen(BaseModel):
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
 
 class CircleObstacle(_Frozen):
     """A cylinder in 3D: centre (x, y), radius."""
 
     type: Literal["circle"] = "circle"
-    x: float
-    y: float
-    radius: PositiveFloat
-    height: PositiveFloat = 0.5
+    x: Coordinate
+    y: Coordinate
+    radius: Length
+    height: Length = 0.5
     unobstructed: bool = False  # IR-SIM: drawn, but neither seen by lidar nor collided with
 
     def sdf(self, points: np.ndarray) -> np.ndarray:
@@ -46,12 +66,12 @@ class BoxObstacle(_Frozen):
     """A box: centre (x, y), ``length`` along its local x, ``width`` along local y, rotated by ``yaw``."""
 
     type: Literal["box"] = "box"
-    x: float
-    y: float
-    length: PositiveFloat
-    width: PositiveFloat
-    yaw: float = 0.0
-    height: PositiveFloat = 0.5
+    x: Coordinate
+    y: Coordinate
+    length: Length
+    width: Length
+    yaw: Angle = 0.0
+    height: Length = 0.5
     unobstructed: bool = False
 
     def sdf(self, points: np.ndarray) -> np.ndarray:
@@ -70,9 +90,15 @@ class PolygonObstacle(_Frozen):
     """A simple polygon given by its vertices in world coordinates."""
 
     type: Literal["polygon"] = "polygon"
-    vertices: Annotated[list[Point], Field(min_length=3)]
-    height: PositiveFloat = 0.5
+    vertices: Annotated[list[Point], Field(min_length=3, max_length=MAX_VERTICES)]
+    height: Length = 0.5
     unobstructed: bool = False
+
+    @model_validator(mode="after")
+    def _simple(self) -> "PolygonObstacle":
+        if not is_simple_polygon(np.asarray(self.vertices, dtype=float)):
+            raise ValueError("the polygon crosses itself or has no area; allowed: a simple polygon, vertices in order")
+        return self
 
     def sdf(self, points: np.ndarray) -> np.ndarray:
         """Signed distance from points (N, 2) to this obstacle."""
@@ -83,8 +109,8 @@ class SegmentObstacle(_Frozen):
     """A polyline of zero thickness (a wall or an IR-SIM ``linestring``)."""
 
     type: Literal["segment"] = "segment"
-    points: Annotated[list[Point], Field(min_length=2)]
-    height: PositiveFloat = 0.5
+    points: Annotated[list[Point], Field(min_length=2, max_length=MAX_VERTICES)]
+    height: Length = 0.5
     unobstructed: bool = False
 
     def sdf(self, points: np.ndarray) -> np.ndarray:
@@ -107,18 +133,18 @@ class RobotProfile(_Frozen):
     """
 
     shape: Literal["circle", "box"] = "circle"
-    radius: PositiveFloat = 0.2
-    length: PositiveFloat = 0.3
-    width: PositiveFloat = 0.2
-    wheel_radius: PositiveFloat = 0.05
-    wheel_base: PositiveFloat = 0.22
-    v_min: float = 0.0
-    v_max: PositiveFloat = 1.0
-    w_max: PositiveFloat = 1.0
-    w_min: float | None = None  # default -w_max
-    accel_v: PositiveFloat = math.inf
-    accel_w: PositiveFloat = math.inf
-    encoder_noise: NonNegativeFloat = 0.0
+    radius: Length = 0.2
+    length: Length = 0.3
+    width: Length = 0.2
+    wheel_radius: Length = 0.05
+    wheel_base: Length = 0.22
+    v_min: Speed = 0.0
+    v_max: Annotated[float, Field(gt=0.0, le=MAX_SPEED)] = 1.0
+    w_max: Annotated[float, Field(gt=0.0, le=MAX_SPEED)] = 1.0
+    w_min: Speed | None = None  # default -w_max
+    accel_v: Acceleration = math.inf
+    accel_w: Acceleration = math.inf
+    encoder_noise: Fraction = 0.0
 
     @model_validator(mode="after")
     def _limits_ordered(self) -> "RobotProfile":
@@ -147,11 +173,11 @@ class LidarSpec(_Frozen):
     """
 
     beams: Annotated[int, Field(ge=1, le=4096)] = 36
-    range_min: NonNegativeFloat = 0.0
-    range_max: PositiveFloat = 5.0
+    range_min: NonNegativeLength = 0.0
+    range_max: Length = 5.0
     angle_range: Annotated[float, Field(gt=0.0, le=2.0 * math.pi + 1e-9)] = 2.0 * math.pi
-    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    noise_std: NonNegativeFloat = 0.0
+    offset: tuple[Annotated[float, Field(ge=-MAX_LENGTH, le=MAX_LENGTH)], Annotated[float, Field(ge=-MAX_LENGTH, le=MAX_LENGTH)], Angle] = (0.0, 0.0, 0.0)
+    noise_std: NonNegativeLength = 0.0
 
     @model_validator(mode="after")
     def _range_ordered(self) -> "LidarSpec":
@@ -174,10 +200,10 @@ class WorldSpec(_Frozen):
     update) or ``exact`` (the arc of constant v and w).
     """
 
-    width: PositiveFloat = 10.0
-    height: PositiveFloat = 10.0
+    width: Length = 10.0
+    height: Length = 10.0
     offset: Point = (0.0, 0.0)
-    step_time: PositiveFloat = 0.1
+    step_time: Annotated[float, Field(gt=0.0, le=10.0)] = 0.1
     walls: bool = True
     integrator: Literal["euler", "exact"] = "euler"
 
@@ -199,13 +225,26 @@ class Scenario(_Frozen):
     world: WorldSpec = WorldSpec()
     robot: RobotProfile = RobotProfile()
     lidar: LidarSpec = LidarSpec()
-    start: tuple[float, float, float] = (1.0, 1.0, 0.0)
+    start: tuple[Coordinate, Coordinate, Angle] = (1.0, 1.0, 0.0)
     goal: Point = (9.0, 9.0)
-    goal_threshold: PositiveFloat = 0.3
-    obstacles: list[Obstacle] = []
+    goal_threshold: Length = 0.3
+    obstacles: Annotated[list[Obstacle], Field(max_length=MAX_OBSTACLES)] = []
     kind: str = "custom"
-    difficulty: Annotated[float, Field(ge=0.0, le=1.0)] = 0.0
+    difficulty: Fraction = 0.0
     seed: int | None = None
+
+    @model_validator(mode="after")
+    def _sizes_fit_the_world(self) -> "Scenario":
+        diagonal = self.world.diagonal
+        if self.robot.bounding_radius >= diagonal:
+            raise ValueError(f"the robot ({self.robot.bounding_radius:g} m across) is wider than the world; "
+                             f"allowed: below its diagonal, {diagonal:g} m")
+        for index, obstacle in enumerate(self.obstacles):
+            size = obstacle.radius if isinstance(obstacle, CircleObstacle) else (
+                max(obstacle.length, obstacle.width) if isinstance(obstacle, BoxObstacle) else 0.0)
+            if size > diagonal:
+                raise ValueError(f"obstacle {index} ({size:g} m) is larger than the world; allowed: up to its diagonal, {diagonal:g} m")
+        return self
 
     @property
     def start_pose(self) -> Pose2D:
@@ -221,17 +260,27 @@ class Scenario(_Frozen):
                 out = np.minimum(out, obstacle.sdf(points))
         return out
 
-    def check(self, source: str | Path | None = None) -> "Scenario":
-        """Raise :class:`ConfigError` if the start or goal is outside the world or inside an obstacle."""
+    def placement_problems(self, source: str | Path | None = None) -> list[ConfigError]:
+        """Where the start or the goal is outside the world or inside (or, for the start, within
+        the robot's radius of) an obstacle, as one-line errors."""
+        problems = []
         clearance = self.robot.bounding_radius
         for field, (x, y) in (("start", self.start[:2]), ("goal", self.goal)):
             if not self.world.contains(x, y):
-                raise ConfigError(source, field, f"({x:g}, {y:g}) lies outside the world {self._extent()}")
+                problems.append(ConfigError(source, field, f"({x:g}, {y:g}) lies outside the world {self._extent()}"))
+                continue
             d = float(self.signed_distance(np.array([[x, y]]))[0])
             if d < (clearance if field == "start" else 0.0):
                 where = "inside an obstacle" if d < 0 else f"{d:.2f} m from an obstacle"
                 need = f"at least {clearance:g} m (the robot's radius)" if field == "start" else "outside"
-                raise ConfigError(source, field, f"({x:g}, {y:g}) is {where}; allowed: {need}")
+                problems.append(ConfigError(source, field, f"({x:g}, {y:g}) is {where}; allowed: {need}"))
+        return problems
+
+    def check(self, source: str | Path | None = None) -> "Scenario":
+        """Raise the first of :meth:`placement_problems`, if any."""
+        problems = self.placement_problems(source)
+        if problems:
+            raise problems[0]
         return self
 
     def _extent(self) -> str:
@@ -246,35 +295,14 @@ class Scenario(_Frozen):
 def pydantic_error(source: str | Path | None, error: ValidationError) -> ConfigError:
     """The first problem of a pydantic error as a one-line :class:`ConfigError`."""
     first = error.errors()[0]
-    field = ".".join(str(part) for part in first["loc"]) or None
+    # Union members add tags such as "list[constrained-int]" to the path: they name no field.
+    field = ".".join(str(part) for part in first["loc"] if "[" not in str(part)) or None
     message = first["msg"]
     if first["type"] == "extra_forbidden":
         message = "unknown key"
-    elif "input" in first and not isinstance(first["input"], (dict, list)):
-        message = f"{message} (got {first['input']!r})"
+    elif "input" in first:
+        message = f"{message} (got {quote(first['input'])})"
     return ConfigError(source, field, message)
-
-
-def read_yaml_mapping(path: str | Path) -> dict:
-    """Parse a YAML file that must hold a mapping; every failure is a one-line :class:`ConfigError`."""
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise ConfigError(path, None, "no such file") from None
-    except (IsADirectoryError, UnicodeDecodeError, PermissionError) as exc:
-        raise ConfigError(path, None, f"cannot be read as text ({type(exc).__name__})") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"line {mark.line + 1}" if mark is not None else None
-        raise ConfigError(path, where, "not valid YAML") from None
-    if data is None:
-        raise ConfigError(path, None, "the file is empty; expected a YAML mapping")
-    if not isinstance(data, dict):
-        raise ConfigError(path, None, f"expected a YAML mapping at the top level, got {type(data).__name__}")
-    return data
 
 
 def scenario_from_mapping(data: dict, source: str | Path | None = None) -> Scenario:

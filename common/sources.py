@@ -1,7 +1,9 @@
 """Where an env's scenarios come from: one fixed scenario, a generator kind, or a world file.
 
 An env calls ``source.draw(rng)`` at every reset with its own seeded generator, so a seed fixes
-the whole sequence of episodes whatever the source.
+the whole sequence of episodes whatever the source. ``draw(rng, resample=True)`` asks a world file
+with random placements for a new layout (IR-SIM's ``reset(random=True)``); without it a file's
+initial state is restored, as IR-SIM's ``reset()`` does. Generator kinds draw anew every episode.
 """
 
 from __future__ import annotations
@@ -11,16 +13,16 @@ from typing import Mapping, Protocol, Sequence
 
 import numpy as np
 
-from common.errors import ConfigError
+from common.errors import ConfigError, quote
 from common.generators import KINDS, generate
 from common.scenario import Scenario
-from common.world_file import read_world_file, world_file_is_random
+from common.world_file import WorldFile
 
 
 class ScenarioSource(Protocol):
     """Anything that yields a scenario per episode."""
 
-    def draw(self, rng: np.random.Generator) -> Scenario: ...
+    def draw(self, rng: np.random.Generator, resample: bool = False) -> Scenario: ...
 
 
 class FixedSource:
@@ -29,7 +31,7 @@ class FixedSource:
     def __init__(self, scenario: Scenario) -> None:
         self.scenario = scenario
 
-    def draw(self, rng: np.random.Generator) -> Scenario:
+    def draw(self, rng: np.random.Generator, resample: bool = False) -> Scenario:
         return self.scenario
 
 
@@ -41,7 +43,7 @@ class ListSource:
             raise ConfigError(None, "world", "an empty list of scenarios")
         self.scenarios = list(scenarios)
 
-    def draw(self, rng: np.random.Generator) -> Scenario:
+    def draw(self, rng: np.random.Generator, resample: bool = False) -> Scenario:
         return self.scenarios[int(rng.integers(len(self.scenarios)))]
 
 
@@ -52,7 +54,7 @@ class GeneratorSource:
         self.kind, self.difficulty, self.template = kind, difficulty, template
         generate(kind, 0, difficulty, "train", template)  # fail now, not at the first reset
 
-    def draw(self, rng: np.random.Generator) -> Scenario:
+    def draw(self, rng: np.random.Generator, resample: bool = False) -> Scenario:
         return generate(self.kind, int(rng.integers(2**31 - 1)), self.difficulty, "train", self.template)
 
 
@@ -66,34 +68,36 @@ class MixSource:
         total = float(sum(weights.values()))
         self.probabilities = [w / total for w in weights.values()]
 
-    def draw(self, rng: np.random.Generator) -> Scenario:
+    def draw(self, rng: np.random.Generator, resample: bool = False) -> Scenario:
         return self.sources[int(rng.choice(len(self.sources), p=self.probabilities))].draw(rng)
 
 
 class FileSource:
-    """A world file; redrawn each episode only if it places objects at random (IR-SIM ``distribution``)."""
+    """A world file, parsed once: its initial state every episode, or with ``resample`` (always, or
+    for one ``draw``) a new random layout drawn from the env's generator."""
 
-    def __init__(self, path: str | Path) -> None:
-        self.path = Path(path)
-        self.random = world_file_is_random(self.path)
-        self.scenario = read_world_file(self.path, seed=0)
+    def __init__(self, path: str | Path, resample: bool = False) -> None:
+        self.file = WorldFile(path)
+        self.resample = resample
 
-    def draw(self, rng: np.random.Generator) -> Scenario:
-        return read_world_file(self.path, seed=int(rng.integers(2**31 - 1))) if self.random else self.scenario
+    def draw(self, rng: np.random.Generator, resample: bool = False) -> Scenario:
+        if self.file.random and (resample or self.resample):
+            return self.file.scenario(int(rng.integers(1, 2**31 - 1)))
+        return self.file.initial
 
 
 def _kind_source(kind: str, difficulty: float, template: Scenario | None) -> GeneratorSource:
     if kind not in KINDS:
-        raise ConfigError(None, "world", f"unknown scenario kind {kind!r}; allowed: {', '.join(KINDS)}")
+        raise ConfigError(None, "world", f"unknown scenario kind {quote(kind)}; allowed: {', '.join(KINDS)}")
     # The warehouse is defined by its 31 obstacles: it is always drawn at full difficulty.
     return GeneratorSource(kind, 1.0 if kind == "warehouse" else difficulty, template)
 
 
 def scenario_source(world: Scenario | str | Path | Sequence[Scenario] | Mapping[str, float] | ScenarioSource,
-                    difficulty: float = 0.5, template: Scenario | None = None) -> ScenarioSource:
+                    difficulty: float = 0.5, template: Scenario | None = None, resample: bool = False) -> ScenarioSource:
     """Interpret an env's ``world`` argument: a Scenario, a list of them, a generator kind or suite
     name (``open``, ``sparse``, ``cluttered``, ``warehouse``, ``trap``), a mapping of kinds to
-    weights (a mix), or a YAML path."""
+    weights (a mix), or a YAML path (``resample``: a random file's layout is redrawn every episode)."""
     if isinstance(world, Scenario):
         return FixedSource(world)
     if isinstance(world, Mapping):
@@ -102,8 +106,8 @@ def scenario_source(world: Scenario | str | Path | Sequence[Scenario] | Mapping[
         if str(world) in KINDS:
             return _kind_source(str(world), difficulty, template)
         if Path(world).suffix in (".yaml", ".yml") or Path(world).exists():
-            return FileSource(world)
-        raise ConfigError(None, "world", f"{str(world)!r} is neither a scenario kind ({', '.join(KINDS)}) nor a YAML file")
+            return FileSource(world, resample)
+        raise ConfigError(None, "world", f"{quote(str(world))} is neither a scenario kind ({', '.join(KINDS)}) nor a YAML file")
     if isinstance(world, Sequence):
         return ListSource(world)
     if hasattr(world, "draw"):

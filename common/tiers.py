@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import importlib
 
-from common.errors import ConfigError
+from common.errors import ConfigError, quote
 from common.nav_env import WorldLike
 from common.scenario import Scenario
 
@@ -15,7 +15,7 @@ TIERS = tuple(_WORLDS)
 def make_world(tier: str, scenario: Scenario, seed: int | None = None) -> WorldLike:
     """A world of the named tier built from ``scenario``."""
     if tier not in _WORLDS:
-        raise ConfigError(None, "world", f"unknown tier {tier!r}; allowed: {', '.join(TIERS)}")
+        raise ConfigError(None, "world", f"unknown tier {quote(tier)}; allowed: {', '.join(TIERS)}")
     module_name, class_name = _WORLDS[tier].split(":")
     try:
         world_class = getattr(importlib.import_module(module_name), class_name)

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
-from common.scenario import Scenario, read_yaml_mapping, scenario_from_mapping
+from common.errors import ScenarioWarning
+from common.scenario import Scenario, scenario_from_mapping
+from common.yaml_io import read_yaml_mapping
 
 _IRSIM_ONLY_KEYS = {"obstacle", "gui", "custom", "irsim"}
 _IRSIM_ROBOT_KEYS = {"kinematics", "state", "sensors", "vel_max", "vel_min", "distribution", "number"}
@@ -20,24 +23,48 @@ def is_irsim(data: dict) -> bool:
     return isinstance(robot, dict) and (bool(_IRSIM_ROBOT_KEYS & robot.keys()) or isinstance(robot.get("shape"), dict))
 
 
-def read_world_file(path: str | Path, seed: int | None = 0) -> Scenario:
-    """The scenario in a YAML file; ``seed`` drives IR-SIM's random placements, if the file has any."""
-    data = read_yaml_mapping(path)
-    if is_irsim(data):
+class WorldFile:
+    """A world file, read and parsed once, as a scenario per seed.
+
+    A project scenario is the same for every seed. An IR-SIM world that places or shapes objects
+    at random (``distribution: random``, ``random_shape``) gives a new layout per seed, drawn as
+    ``irsim.make(path, seed=seed)`` would; seed 0 is its *initial state*.
+
+    A project scenario whose start or goal is outside the world or inside an obstacle is a
+    :class:`ConfigError`; an IR-SIM world gets a :class:`ScenarioWarning` instead (once, for the
+    initial state), since IR-SIM runs it: the robot collides at once, or never arrives.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self.data = read_yaml_mapping(self.path)
+        self.irsim = is_irsim(self.data)
+        if self.irsim:
+            from common.irsim_format import has_random_placement
+
+            self.random = has_random_placement(self.data)
+        else:
+            self.random = False
+        self.initial = self._parse(0, warn=True)
+
+    def scenario(self, seed: int = 0) -> Scenario:
+        """The file's scenario for ``seed`` (the initial state for seed 0, and for every seed if the file has no randomness)."""
+        return self._parse(seed, warn=False) if self.random and seed != 0 else self.initial
+
+    def _parse(self, seed: int, warn: bool) -> Scenario:
+        if not self.irsim:
+            return scenario_from_mapping(self.data, self.path)
         from common.irsim_format import parse_irsim
 
-        return parse_irsim(data, source=path, seed=seed)
-    return scenario_from_mapping(data, path)
+        scenario = parse_irsim(self.data, source=self.path, seed=seed)
+        for problem in scenario.placement_problems(self.path) if warn else ():
+            warnings.warn(f"{problem} (IR-SIM runs it as it is)", ScenarioWarning, stacklevel=3)
+        return scenario
 
 
-def world_file_is_random(path: str | Path) -> bool:
-    """Whether reading the file with different seeds can give different scenarios."""
-    data = read_yaml_mapping(path)
-    if not is_irsim(data):
-        return False
-    from common.irsim_format import has_random_placement
-
-    return has_random_placement(data)
+def read_world_file(path: str | Path, seed: int = 0) -> Scenario:
+    """The scenario in a world file (project or IR-SIM YAML) for ``seed``; see :class:`WorldFile`."""
+    return WorldFile(path).scenario(seed)
 
 
-__all__ = ["is_irsim", "read_world_file", "world_file_is_random"]
+__all__ = ["WorldFile", "is_irsim", "read_world_file"]

@@ -11,9 +11,11 @@ import pytest
 import yaml
 
 from common.errors import ConfigError
-from common.irsim_format import circle_vertices, has_random_placement, is_simple_polygon, parse_irsim
-from common.scenario import BoxObstacle, PolygonObstacle, SegmentObstacle, read_yaml_mapping
-from common.world_file import read_world_file, world_file_is_random
+from common.irsim_format import circle_vertices, has_random_placement, parse_irsim
+from common.polygons import is_simple_polygon
+from common.scenario import BoxObstacle, PolygonObstacle, SegmentObstacle
+from common.yaml_io import read_yaml_mapping
+from common.world_file import WorldFile, read_world_file
 
 ROBOT = "robot:\n  kinematics: {name: diff}\n"
 
@@ -298,7 +300,7 @@ def test_irsim_wrapper_and_world_file_entry_points(tmp_path):
     path.write_text(text)
     scenario = read_world_file(path, seed=3)
     assert scenario.start == (2.0, 3.0, 0.0) and len(scenario.obstacles) == 1
-    assert world_file_is_random(path)
+    assert WorldFile(path).random
 
 
 # -- errors --------------------------------------------------------------------------------------
@@ -350,7 +352,7 @@ ERRORS = [
     (ROBOT + "obstacle: [{shape: {name: polygon, vertices: [[0, 0], [1, 0], [2, 0]]}}]\n", "obstacle[0].shape.vertices", "no area"),
     (ROBOT + "obstacle: [{shape: {name: linestring}}]\n", "obstacle[0].shape.vertices", "at least 2"),
     (ROBOT + "obstacle: [{shape: {name: linestring, vertices: [[0, 0], [1]]}}]\n", "obstacle[0].shape.vertices[1]", "2 numbers"),
-    (ROBOT + "obstacle: {number: -2}\n", "obstacle.number", "must be >= 0 and <= 1000"),
+    (ROBOT + "obstacle: {number: -2}\n", "obstacle.number", "must be >= 0 and <= 2001"),
     (ROBOT + "obstacle: {number: 2.5}\n", "obstacle.number", "expected an integer"),
     (ROBOT + "obstacle: {distribution: {name: uniform}}\n", "obstacle.distribution.name", "allowed: manual, random, circle"),
     (ROBOT + "obstacle: {distribution: {range_low: [0, 0, 0]}}\n", "obstacle.distribution.name", "missing"),

@@ -24,7 +24,7 @@ from common.controllers.path_follower import AStarPursuit, PathFollower, RrtPurs
 from common.controllers.pid_blend import PidHeadingBlend
 from common.controllers.potential_field import PotentialField
 from common.controllers.reactive import ReactiveAvoidance
-from common.errors import ConfigError
+from common.errors import ConfigError, quote
 
 __all__ = ["AStarPursuit", "CONTROLLERS", "Controller", "GoToGoal", "PathFollower", "RrtPursuit", "LidarGeometry", "PidHeadingBlend", "PotentialField",
            "ReactiveAvoidance", "controller_parameters", "make_controller"]
@@ -91,7 +91,7 @@ def _coerce(value: Any, annotation: Any, default: Any, source: str | Path | None
         elif option is Any:
             return value
     allowed = " or ".join(_describe(option) for option in options)
-    raise ConfigError(source, field, f"got {value!r}; allowed: {allowed} (default {default!r})")
+    raise ConfigError(source, field, f"got {quote(value)}; allowed: {allowed} (default {quote(default)})")
 
 
 def _describe(option: Any) -> str:

@@ -1,18 +1,22 @@
 """Turn YAML hyperparameters into what stable-baselines3 takes, as rl-baselines3-zoo does.
 
-Two values cannot be written as plain YAML: a learning-rate schedule (``"lin_3e-4"``: linear from
-3e-4 to 0 over the stage) and action noise (``{type: normal, sigma: 0.1}`` or
-``{type: ornstein_uhlenbeck, sigma: 0.1}``, one sigma for both action dimensions).
+Three values cannot be written as plain YAML: a learning-rate schedule (``"lin_3e-4"``: linear from
+3e-4 to 0 over the stage), action noise (``{type: normal, sigma: 0.1}`` or
+``{type: ornstein_uhlenbeck, sigma: 0.1}``, one sigma for both action dimensions) and the network's
+activation (``policy_kwargs: {activation_fn: relu}``, by name). ``policy_kwargs`` takes the keys of
+:class:`PolicyKwargs`: what describes an MLP policy as plain data, so a policy file's manifest can
+rebuild the network without running anything.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from common.errors import ConfigError
+from common.errors import ConfigError, quote
 
 _NOISE_TYPES = ("normal", "ornstein_uhlenbeck")
 
@@ -29,7 +33,7 @@ def _schedule(value: Any, source, field: str) -> Any:
                 raise ValueError
             return _linear(float(number))
         except ValueError:
-            raise ConfigError(source, field, f"{value!r}: allowed: a number or 'lin_<number>' (linear to 0)") from None
+            raise ConfigError(source, field, f"{quote(value)}: allowed: a number or 'lin_<number>' (linear to 0)") from None
     return value
 
 
@@ -40,9 +44,51 @@ def _noise(value: Any, action_dim: int, source, field: str) -> Any:
         raise ConfigError(source, field, f"allowed: {{type: {' | '.join(_NOISE_TYPES)}, sigma: <number>}}")
     sigma = value.get("sigma", 0.1)
     if isinstance(sigma, bool) or not isinstance(sigma, (int, float)) or sigma < 0:
-        raise ConfigError(source, f"{field}.sigma", f"expected a number >= 0, got {sigma!r}")
+        raise ConfigError(source, f"{field}.sigma", f"expected a number >= 0, got {quote(sigma)}")
     noise = NormalActionNoise if value["type"] == "normal" else OrnsteinUhlenbeckActionNoise
     return noise(mean=np.zeros(action_dim), sigma=float(sigma) * np.ones(action_dim))
+
+
+ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu", "gelu", "silu")
+Layers = Annotated[list[Annotated[int, Field(ge=1, le=4096)]], Field(max_length=16)]
+
+
+class PolicyKwargs(BaseModel):
+    """An MLP policy's shape as plain data: stable-baselines3's ``policy_kwargs`` that need no code."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+
+    net_arch: Layers | dict[Literal["pi", "vf", "qf"], Layers] | None = None
+    activation_fn: Literal[ACTIVATIONS] | None = None  # type: ignore[valid-type]
+    n_critics: Annotated[int, Field(ge=1, le=10)] | None = None
+    share_features_extractor: bool | None = None
+    log_std_init: Annotated[float, Field(ge=-20.0, le=20.0)] | None = None
+    ortho_init: bool | None = None
+
+    def to_sb3(self) -> dict[str, Any]:
+        """The keyword arguments stable-baselines3 takes (unset keys left to its defaults)."""
+        out = self.model_dump(exclude_none=True)
+        if "activation_fn" in out:
+            out["activation_fn"] = _activation_classes()[out["activation_fn"]]
+        return out
+
+    @classmethod
+    def from_sb3(cls, kwargs: dict[str, Any]) -> "PolicyKwargs":
+        """Describe a model's ``policy_kwargs``; ValueError if they hold what plain data cannot."""
+        data = {k: v for k, v in kwargs.items() if k != "use_sde"}  # SAC keeps use_sde there too
+        if "activation_fn" in data:
+            names = {activation: name for name, activation in _activation_classes().items()}
+            data["activation_fn"] = names.get(data["activation_fn"], repr(data["activation_fn"]))
+        try:
+            return cls.model_validate(data)
+        except ValidationError as exc:
+            raise ValueError(f"policy_kwargs {quote(kwargs)} cannot be stored as data: {exc.errors()[0]['msg']}") from None
+
+
+def _activation_classes() -> dict[str, type]:
+    import torch.nn as nn
+
+    return {"tanh": nn.Tanh, "relu": nn.ReLU, "elu": nn.ELU, "leaky_relu": nn.LeakyReLU, "gelu": nn.GELU, "silu": nn.SiLU}
 
 
 def resolve_hyperparams(hyperparams: dict[str, Any], action_dim: int = 2, source: str | Path | None = None,
@@ -54,4 +100,19 @@ def resolve_hyperparams(hyperparams: dict[str, Any], action_dim: int = 2, source
             out[key] = _schedule(out[key], source, f"{field}.{key}")
     if "action_noise" in out:
         out["action_noise"] = _noise(out["action_noise"], action_dim, source, f"{field}.action_noise")
+    if "policy_kwargs" in out:
+        out["policy_kwargs"] = policy_kwargs_from_yaml(out["policy_kwargs"], source, f"{field}.policy_kwargs").to_sb3()
     return out
+
+
+def policy_kwargs_from_yaml(value: Any, source: str | Path | None = None, field: str = "policy_kwargs") -> PolicyKwargs:
+    """Validate a YAML (or manifest JSON) ``policy_kwargs`` mapping; one-line errors."""
+    from common.scenario import pydantic_error
+
+    if not isinstance(value, dict):
+        raise ConfigError(source, field, f"got {quote(value)}; allowed: a mapping with keys {', '.join(PolicyKwargs.model_fields)}")
+    try:
+        return PolicyKwargs.model_validate(value)
+    except ValidationError as exc:
+        error = pydantic_error(None, exc)
+        raise ConfigError(source, f"{field}.{error.field}" if error.field else field, error.problem) from None

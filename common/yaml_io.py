@@ -1,0 +1,136 @@
+"""The one YAML reader for every file the project reads: curricula, scenarios, IR-SIM worlds, run configs.
+
+Files are shared between people, so reading one must stay cheap whatever it holds. On top of
+PyYAML's safe loader (no tags that build Python objects) it refuses, each as a one-line
+:class:`ConfigError`:
+
+* files over :data:`MAX_BYTES`;
+* nesting deeper than :data:`MAX_DEPTH` (PyYAML's composer recurses and would overflow);
+* documents whose aliases would expand past :data:`MAX_NODES` values (a "billion laughs" file is
+  a few hundred bytes that anything walking the data, a validator or an error message, expands
+  exponentially), or that refer to themselves.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from common.errors import ConfigError
+
+MAX_BYTES = 2 * 1024 * 1024
+MAX_DEPTH = 48
+MAX_NODES = 200_000
+
+
+class _Refused(Exception):
+    """Why a document was refused, and where."""
+
+    def __init__(self, problem: str, mark: yaml.Mark | None = None) -> None:
+        super().__init__(problem)
+        self.problem = problem
+        self.line = mark.line + 1 if mark is not None else None
+
+
+class _BoundedLoader(yaml.SafeLoader):
+    """A safe loader whose composer refuses deep nesting before it recurses into it."""
+
+    def __init__(self, stream: str) -> None:
+        super().__init__(stream)
+        self._depth = 0
+
+    def compose_node(self, parent, index):
+        self._depth += 1
+        if self._depth > MAX_DEPTH:
+            raise _Refused(f"nested deeper than {MAX_DEPTH} levels", self.peek_event().start_mark)
+        try:
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+
+def _children(node: yaml.Node) -> list[yaml.Node]:
+    if isinstance(node, yaml.SequenceNode):
+        return list(node.value)
+    if isinstance(node, yaml.MappingNode):
+        return [part for pair in node.value for part in pair]
+    return []
+
+
+def _check_expansion(root: yaml.Node) -> None:
+    """Count the values the node graph expands to (aliases followed), without expanding it.
+
+    A node reached through several aliases is counted once per path, with its size memoised, so
+    the count is exact and the walk linear in the number of distinct nodes. A cycle is refused.
+    """
+    size: dict[int, int] = {}
+    depth: dict[int, int] = {}
+    on_path: set[int] = set()
+    stack: list[tuple[yaml.Node, bool]] = [(root, False)]
+    while stack:
+        node, done = stack.pop()
+        key = id(node)
+        if done:
+            on_path.discard(key)
+            children = _children(node)
+            size[key] = 1 + sum(size[id(c)] for c in children)
+            depth[key] = 1 + max((depth[id(c)] for c in children), default=0)
+            if size[key] > MAX_NODES:
+                raise _Refused(f"aliases expand to more than {MAX_NODES:,} values", node.start_mark)
+            if depth[key] > MAX_DEPTH:
+                raise _Refused(f"aliases nest deeper than {MAX_DEPTH} levels", node.start_mark)
+            continue
+        if key in size:
+            continue
+        if key in on_path:
+            raise _Refused("an alias refers to a value that contains it", node.start_mark)
+        on_path.add(key)
+        stack.append((node, True))
+        stack.extend((child, False) for child in _children(node) if id(child) not in size)
+
+
+def parse_yaml(text: str, source: str | Path | None = None) -> Any:
+    """Parse YAML text within the bounds above; every failure is a one-line :class:`ConfigError`."""
+    if len(text) > MAX_BYTES:
+        raise ConfigError(source, None, f"larger than {MAX_BYTES // 1024 // 1024} MiB; allowed: smaller YAML files")
+    loader = _BoundedLoader(text)
+    try:
+        node = loader.get_single_node()
+        if node is None:
+            return None
+        _check_expansion(node)
+        return loader.construct_document(node)
+    except _Refused as refused:
+        raise ConfigError(source, f"line {refused.line}" if refused.line else None,
+                          f"{refused.problem}; refused") from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        raise ConfigError(source, f"line {mark.line + 1}" if mark is not None else None, "not valid YAML") from None
+    finally:
+        loader.dispose()
+
+
+def read_yaml(path: str | Path) -> Any:
+    """Read and parse a YAML file (see :func:`parse_yaml`)."""
+    path = Path(path)
+    try:
+        if path.stat().st_size > MAX_BYTES:
+            raise ConfigError(path, None, f"larger than {MAX_BYTES // 1024 // 1024} MiB; allowed: smaller YAML files")
+        text = path.read_text()
+    except FileNotFoundError:
+        raise ConfigError(path, None, "no such file") from None
+    except (IsADirectoryError, UnicodeDecodeError, PermissionError) as exc:
+        raise ConfigError(path, None, f"cannot be read as text ({type(exc).__name__})") from None
+    return parse_yaml(text, path)
+
+
+def read_yaml_mapping(path: str | Path) -> dict:
+    """Read a YAML file that must hold a mapping at the top level."""
+    data = read_yaml(path)
+    if data is None:
+        raise ConfigError(path, None, "the file is empty; expected a YAML mapping")
+    if not isinstance(data, dict):
+        raise ConfigError(path, None, f"expected a YAML mapping at the top level, got {type(data).__name__}")
+    return data
