@@ -12,14 +12,33 @@ Two mappings of a[0] to v:
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from gymnasium import spaces
 
-from common.errors import ConfigError
+from common.errors import ConfigError, quote
 from common.scenario import RobotProfile
 
 ACTION_SPACE = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
 MAPPINGS = ("linear", "rectified")
+
+
+def _components(action) -> tuple[float, float]:
+    """The two numbers of an action, refusing a wrong shape or a non-finite value: a NaN let through
+    would silently corrupt the robot's pose and every observation after it."""
+    array = isinstance(action, np.ndarray)
+    shape = action.shape if array else np.shape(action)
+    if shape != (2,):
+        raise ValueError(f"action {quote(action)}: expected shape (2,) with values in [-1, 1], got shape {shape}")
+    try:
+        first, second = action.tolist() if array else action  # tolist: the fast path for arrays
+        a0, a1 = float(first), float(second)
+    except (TypeError, ValueError):
+        raise ValueError(f"action {quote(action)}: expected two numbers in [-1, 1]") from None
+    if not (math.isfinite(a0) and math.isfinite(a1)):
+        raise ValueError(f"action {quote(action)}: expected finite numbers in [-1, 1] (NaN and inf are refused)")
+    return a0, a1
 
 
 class ActionMapping:
@@ -27,16 +46,17 @@ class ActionMapping:
 
     def __init__(self, robot: RobotProfile, kind: str = "linear") -> None:
         if kind not in MAPPINGS:
-            raise ConfigError(None, "action_mapping", f"unknown mapping {kind!r}; allowed: {', '.join(MAPPINGS)}")
+            raise ConfigError(None, "action_mapping", f"unknown mapping {quote(kind)}; allowed: {', '.join(MAPPINGS)}")
         self.kind = kind
         self.v_max = robot.v_max
         self.w_max = robot.w_max
         self._rectified = kind == "rectified"
 
     def to_velocity(self, action) -> tuple[float, float]:
-        """Velocities for an action (clipped into [-1, 1] first)."""
-        a0 = min(max(float(action[0]), -1.0), 1.0)
-        a1 = min(max(float(action[1]), -1.0), 1.0)
+        """Velocities for an action: finite values are clipped into [-1, 1]; anything else is a ValueError."""
+        a0, a1 = _components(action)
+        a0 = min(max(a0, -1.0), 1.0)
+        a1 = min(max(a1, -1.0), 1.0)
         v = max(a0, 0.0) * self.v_max if self._rectified else 0.5 * (a0 + 1.0) * self.v_max
         return v, a1 * self.w_max
 

@@ -16,7 +16,8 @@ from common.kinematics import wrap_angle
 from common.observations import DEFAULT_GOAL_DISTANCE_SCALE, make_layout
 from common.readings import Readings
 from common.rewards import Reward, StepContext
-from common.scenario import Scenario
+from common.errors import ConfigError, quote
+from common.scenario import MAX_LENGTH, Scenario
 from common.sources import ScenarioSource, scenario_source
 
 
@@ -46,11 +47,14 @@ class NavigationEnv(gym.Env):
         goal_distance_scale: float = DEFAULT_GOAL_DISTANCE_SCALE,
         template: Scenario | None = None,
         action_mapping: str = "linear",
+        resample: bool = False,
+        goal_threshold: float | Sequence[float] | None = None,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode {render_mode!r}; allowed: None, {', '.join(self.metadata['render_modes'])}")
         self.render_mode = render_mode
-        self.source = scenario_source(world, difficulty, template)
+        self.source = scenario_source(world, difficulty, template, resample)
+        self.goal_threshold = _threshold_range(goal_threshold)
         self.observation_name = observation
         self.action_mapping = action_mapping
         self.goal_distance_scale = goal_distance_scale
@@ -82,18 +86,24 @@ class NavigationEnv(gym.Env):
         return math.hypot(dx, dy), wrap_angle(math.atan2(dy, dx) - yaw)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+        """Start an episode; ``options={"resample": True}`` redraws a random world file's layout
+        (IR-SIM's ``reset(random=True)``) where a plain reset restores its initial state."""
         super().reset(seed=seed)
-        scenario = self.source.draw(self.np_random)
+        scenario = self.source.draw(self.np_random, resample=bool((options or {}).get("resample", False)))
         if scenario is not self.scenario:
             self._load(scenario)
         self._readings = self.world.reset(seed=int(self.np_random.integers(2**31 - 1)))
+        if self.goal_threshold is not None:
+            low, high = self.goal_threshold
+            self._threshold = float(self.np_random.uniform(low, high)) if high > low else low
         self.reward.reset()
         self._steps = 0
         self._prev_distance, _ = self._distance_and_bearing(self._readings)
         self.trajectory = [tuple(self._readings.pose[:2])]
         if self.render_mode == "human":
             self.render()
-        return self.layout(self._readings, self._goal), {"distance": self._prev_distance, "scenario": scenario.name}
+        info = {"distance": self._prev_distance, "scenario": scenario.name, "goal_threshold": self._threshold}
+        return self.layout(self._readings, self._goal), info
 
     def step(self, action) -> tuple[np.ndarray, float, bool, bool, dict]:
         v, w = self.actions.to_velocity(action)
@@ -117,3 +127,18 @@ class NavigationEnv(gym.Env):
     def readings(self) -> Readings | None:
         """The last readings (None before the first reset)."""
         return self._readings
+
+
+def _threshold_range(value: float | Sequence[float] | None) -> tuple[float, float] | None:
+    """``goal_threshold`` as (low, high): None keeps each scenario's, a number fixes it, a pair is drawn
+    from uniformly per episode (so a policy learns to arrive whatever radius it is judged by)."""
+    if value is None:
+        return None
+    pair = (value, value) if isinstance(value, (int, float)) and not isinstance(value, bool) else value
+    try:
+        low, high = (float(v) for v in pair)
+    except (TypeError, ValueError):
+        raise ConfigError(None, "goal_threshold", f"got {quote(value)}; allowed: null, a number or [low, high] in metres") from None
+    if not (0.0 < low <= high <= MAX_LENGTH):
+        raise ConfigError(None, "goal_threshold", f"got {quote(value)}; allowed: 0 < low <= high <= {MAX_LENGTH:g} m")
+    return low, high
