@@ -83,9 +83,9 @@ def test_run_writes_every_artefact_and_resumes_after_kill(tmp_path):
     run = json.loads((whole / "run.json").read_text())
     assert run["package_version"] and "git_commit" in run and run["seed"] == 0
     assert "| open | ppo | nav7 | 6,144 |" in (whole / "report.md").read_text()
-    from common.curriculum.policy import read_manifest
+    from common.curriculum.policy_file import read_manifest
 
-    manifest, _ = read_manifest(whole / "stages/0-open/policy.zip")
+    manifest = read_manifest(whole / "stages/0-open/policy.zip")
     assert manifest["curriculum"] == "tiny" and manifest["observation"] == "nav7" and manifest["timesteps"] > 0
     assert manifest["final_eval"]["draw"] == "test" and manifest["final_eval"]["episodes"] == 6
 
@@ -106,7 +106,7 @@ def test_run_writes_every_artefact_and_resumes_after_kill(tmp_path):
     resumed = _run(killed, "--resume")
     assert resumed.wait(timeout=300) == 0, resumed.stdout.read()
     assert _shape(killed) == _shape(whole)
-    assert read_manifest(killed / "stages/1-sparse/policy.zip")[0]["git_commit"] == "commit-at-start"
+    assert read_manifest(killed / "stages/1-sparse/policy.zip")["git_commit"] == "commit-at-start"
     rows = list(csv.DictReader((killed / "eval.csv").open()))
     assert (killed / "eval.csv").read_text().startswith(before.splitlines()[0])
     for stage in ("open", "sparse"):
@@ -138,7 +138,7 @@ class RandomAgent:
     def __init__(self, seed: int) -> None:
         self.rng = np.random.default_rng(seed)
 
-    def bind(self, robot, lidar) -> None:
+    def bind(self, robot, lidar, goal_threshold) -> None:
         self.robot = robot
 
     def reset(self) -> None:
@@ -155,7 +155,8 @@ def test_short_ppo_training_beats_a_random_policy_and_round_trips(tmp_path):
     from stable_baselines3 import PPO
 
     import flatland  # noqa: F401
-    from common.curriculum.policy import PolicyAgent, load_policy, save_policy
+    from common.curriculum.policy import PolicyAgent, load_policy
+    from common.curriculum.policy_file import save_policy
 
     from stable_baselines3.common.env_util import make_vec_env
 
@@ -181,7 +182,7 @@ def test_eval_json_schema_and_bad_policy_files(tmp_path, capsys):
     from stable_baselines3 import PPO
 
     import flatland  # noqa: F401
-    from common.curriculum.policy import save_policy
+    from common.curriculum.policy_file import save_policy
 
     model = PPO("MlpPolicy", gym.make("flatland/Nav-v0", world="open"), n_steps=64, batch_size=64, device="cpu")
     path = save_policy(model, tmp_path / "p.zip", {"algorithm": "ppo", "observation": "nav7", "goal_distance_scale": 10.0})

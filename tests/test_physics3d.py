@@ -22,7 +22,7 @@ import physics3d  # noqa: F401  (registers the env)
 from common.bench import bare_pybullet_steps_per_s, camera_fps, physics3d_bench_scenario, physics3d_steps_per_s
 from common.cli import main
 from common.controllers import make_controller
-from common.curriculum.policy import save_policy
+from common.curriculum.policy_file import save_policy
 from common.evaluation import run_episode
 from common.generators import generate
 from tests.rollouts import rollout, same

@@ -1,34 +1,27 @@
-"""Policies as self-describing zips: stable-baselines3's own zip plus a manifest and normaliser.
+"""Trained policies: rebuilt from a policy zip's manifest and weights, and driven like a controller.
 
-The manifest (``nav_manifest.json`` inside the zip) names the algorithm, the observation layout
-and its distance scale, so :func:`load_policy` can rebuild exactly the observations the policy was
-trained on; observation-normaliser statistics travel as ``nav_normalizer.json``. Writes are atomic
-(a temporary file renamed over the target), so a kill never leaves half a zip behind.
+:func:`load_policy` builds the network the manifest describes and loads ``policy.pth`` into it
+(weights only; see :mod:`common.curriculum.policy_file`). A zip whose weights do not fit its
+manifest is refused with a one-line :class:`ConfigError`. Resuming training and ``init_from``
+load weights the same way into a model built from the curriculum's own hyperparameters.
 """
 
 from __future__ import annotations
 
-import json
-import os
-import tempfile
-import zipfile
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from common.actions import ActionMapping
+from common.actions import ACTION_SPACE, ActionMapping
+from common.curriculum.policy_file import Manifest, Normalizer, PolicyFile
 from common.errors import ConfigError
 from common.observations import ObservationLayout, make_layout
 from common.readings import Readings
 from common.scenario import LidarSpec, RobotProfile
 
-MANIFEST = "nav_manifest.json"
-NORMALIZER = "nav_normalizer.json"
-FORMAT = 1
-_UMASK = os.umask(0)
-os.umask(_UMASK)
+POLICY_WEIGHTS = "policy"  # policy.pth: the network's state dict
+VARIABLES = "pytorch_variables"  # pytorch_variables.pth: e.g. SAC's entropy coefficient
 
 
 def algorithm_class(name: str):
@@ -38,109 +31,48 @@ def algorithm_class(name: str):
     return {"ppo": PPO, "sac": SAC, "td3": TD3}[name]
 
 
-@dataclass(frozen=True)
-class Normalizer:
-    """Observation normalisation as VecNormalize applies it: clip((obs - mean) / sqrt(var + eps))."""
-
-    mean: np.ndarray
-    var: np.ndarray
-    clip: float
-    epsilon: float
-
-    @classmethod
-    def from_vec_normalize(cls, venv) -> "Normalizer":
-        rms = venv.obs_rms
-        return cls(np.asarray(rms.mean, dtype=np.float64), np.asarray(rms.var, dtype=np.float64),
-                   float(venv.clip_obs), float(venv.epsilon))
-
-    def __call__(self, obs: np.ndarray) -> np.ndarray:
-        return np.clip((obs - self.mean) / np.sqrt(self.var + self.epsilon), -self.clip, self.clip).astype(np.float32)
-
-    def to_json(self) -> dict:
-        return {"mean": self.mean.tolist(), "var": self.var.tolist(), "clip": self.clip, "epsilon": self.epsilon}
-
-    @classmethod
-    def from_json(cls, data: dict) -> "Normalizer":
-        return cls(np.asarray(data["mean"]), np.asarray(data["var"]), float(data["clip"]), float(data["epsilon"]))
+def observation_space(manifest: Manifest):
+    """The Box a policy of this manifest reads (its shape depends on the layout alone)."""
+    return make_layout(manifest.observation, RobotProfile(), LidarSpec(), manifest.goal_distance_scale).space
 
 
-def atomic_write(path: Path, write) -> Path:
-    """Call ``write(tmp_path)`` then rename the temporary file over ``path``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(handle)
+def build_policy(manifest: Manifest, device: str = "cpu"):
+    """A fresh SB3 policy network shaped as the manifest says."""
+    kwargs: dict[str, Any] = manifest.policy_kwargs.to_sb3()
+    if manifest.algorithm in ("ppo", "sac"):
+        kwargs["use_sde"] = manifest.use_sde
+    policy_class = algorithm_class(manifest.algorithm).policy_aliases["MlpPolicy"]
+    policy = policy_class(observation_space(manifest), ACTION_SPACE, lambda _: 0.0, **kwargs)
+    return policy.to(device)
+
+
+def _load_module(module, state: Any, file: PolicyFile, name: str, what: str) -> None:
     try:
-        write(Path(tmp))
-        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600 files; give the usual permissions
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return path
+        module.load_state_dict(state, strict=True)
+    except (RuntimeError, TypeError, ValueError, AttributeError):
+        raise ConfigError(file.path, f"{name}.pth", f"the weights do not fit {what}; refused") from None
 
 
-def save_policy(model, path: str | Path, manifest: dict[str, Any], normalizer: Normalizer | None = None) -> Path:
-    """Save an SB3 model with the manifest (and normaliser) inside its zip, atomically."""
-
-    def write(tmp: Path) -> None:
-        model.save(tmp)
-        # SB3 appends ".zip" to a name without it: our temporary name ends in .tmp.
-        saved = tmp if tmp.stat().st_size else tmp.with_name(tmp.name + ".zip")
-        if saved != tmp:
-            os.replace(saved, tmp)
-        with zipfile.ZipFile(tmp, "a") as archive:
-            archive.writestr(MANIFEST, json.dumps({"format": FORMAT, **manifest}, indent=2))
-            if normalizer is not None:
-                archive.writestr(NORMALIZER, json.dumps(normalizer.to_json()))
-
-    return atomic_write(Path(path), write)
-
-
-def update_manifest(path: str | Path, extra: dict[str, Any]) -> Path:
-    """Add keys to a policy zip's manifest (the zip is rebuilt and swapped in atomically)."""
-    manifest, _ = read_manifest(path)
-    manifest.update(extra)
-
-    def write(tmp: Path) -> None:
-        with zipfile.ZipFile(path) as source, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as target:
-            for item in source.infolist():
-                data = json.dumps(manifest, indent=2).encode() if item.filename == MANIFEST else source.read(item)
-                target.writestr(item, data)
-
-    return atomic_write(Path(path), write)
-
-
-def read_manifest(path: str | Path) -> tuple[dict, Normalizer | None]:
-    """The manifest and normaliser of a policy zip (one-line errors for anything else)."""
-    path = Path(path)
-    try:
-        with zipfile.ZipFile(path) as archive:
-            names = set(archive.namelist())
-            if MANIFEST not in names:
-                raise ConfigError(path, None, f"not a policy of this project (no {MANIFEST}); train one with `curriculum run`")
-            manifest = json.loads(archive.read(MANIFEST))
-            normalizer = Normalizer.from_json(json.loads(archive.read(NORMALIZER))) if NORMALIZER in names else None
-    except FileNotFoundError:
-        raise ConfigError(path, None, "no such file") from None
-    except (zipfile.BadZipFile, IsADirectoryError):
-        raise ConfigError(path, None, "not a zip file; expected a policy saved by `curriculum run`") from None
-    return manifest, normalizer
+def _network_description(manifest: Manifest) -> str:
+    net = manifest.policy_kwargs.model_dump(exclude_none=True) or "SB3's defaults"
+    return f"a {manifest.algorithm.upper()} policy with policy_kwargs {net} (the manifest's)"
 
 
 class PolicyAgent:
     """A trained policy driven like a controller: readings -> observation -> action -> (v, w).
 
     It builds its observations with the layout in its manifest, so evaluation in either tier
-    sees what the policy saw in training.
+    sees what the policy saw in training. ``model`` is anything with SB3's ``predict``: a
+    policy network or a whole algorithm. ``max_steps`` is the episode length it trained with.
     """
 
     def __init__(self, model, observation: str, goal_distance_scale: float, normalizer: Normalizer | None = None,
-                 name: str = "policy", action_mapping: str = "linear") -> None:
+                 name: str = "policy", action_mapping: str = "linear", max_steps: int | None = None) -> None:
         self.model, self.observation, self.goal_distance_scale = model, observation, goal_distance_scale
         self.normalizer, self.name, self.action_mapping = normalizer, name, action_mapping
+        self.max_steps = max_steps
 
-    def bind(self, robot: RobotProfile, lidar: LidarSpec) -> None:
+    def bind(self, robot: RobotProfile, lidar: LidarSpec, goal_threshold: float = 0.3) -> None:
         self.layout: ObservationLayout = make_layout(self.observation, robot, lidar, self.goal_distance_scale)
         self.mapping = ActionMapping(robot, self.action_mapping)
 
@@ -157,13 +89,61 @@ class PolicyAgent:
 
 
 def load_policy(path: str | Path, device: str = "cpu", name: str | None = None) -> PolicyAgent:
-    """A :class:`PolicyAgent` from a policy zip."""
-    manifest, normalizer = read_manifest(path)
-    model = algorithm_class(manifest["algorithm"]).load(str(path), device=device)
+    """A :class:`PolicyAgent` from a policy zip (nothing in the zip is executed)."""
+    file = PolicyFile(path)
+    manifest = file.manifest
+    policy = build_policy(manifest, device)
+    _load_module(policy, file.tensors(f"{POLICY_WEIGHTS}.pth", device), file, POLICY_WEIGHTS,
+                 _network_description(manifest))
+    policy.set_training_mode(False)
+    normalizer = file.normalizer(observation_space(manifest).shape[0])
     if name is None:
         # A run's files are all called policy/best/last.zip: name those by curriculum and stage.
         stem = Path(path).stem
-        generic = stem in ("policy", "best", "last") and "curriculum" in manifest
-        name = f"{manifest['curriculum']}/{manifest['stage']}" if generic else stem
-    return PolicyAgent(model, manifest["observation"], manifest["goal_distance_scale"], normalizer,
-                       name=name, action_mapping=manifest.get("action_mapping", "linear"))
+        extra = file.raw_manifest
+        generic = stem in ("policy", "best", "last") and "curriculum" in extra and "stage" in extra
+        name = f"{extra['curriculum']}/{extra['stage']}" if generic else stem
+    return PolicyAgent(policy, manifest.observation, manifest.goal_distance_scale, normalizer, name=str(name),
+                       action_mapping=manifest.action_mapping, max_steps=manifest.max_steps)
+
+
+def load_weights(model, path: str | Path, policy_only: bool) -> PolicyFile | None:
+    """Load a zip's weights into a model built from the curriculum (resume, or ``init_from``).
+
+    ``policy_only`` loads the network alone (a new stage starting from a trained policy; the zip
+    may be any SB3 zip with matching weights). Otherwise the optimiser states, the extra torch
+    variables and the step counters are restored too (resuming the same stage from its checkpoint).
+    Returns the :class:`PolicyFile` when the zip is one of this project's (None for a foreign one).
+    """
+    file = PolicyFile(path, require_manifest=not policy_only)
+    what = f"this stage's {type(model).__name__} network"
+    states, variables = model._get_torch_save_params()
+    for name in states if not policy_only else [POLICY_WEIGHTS]:
+        target = _attribute(model, name)
+        state = file.tensors(f"{name}.pth", model.device)
+        if name == POLICY_WEIGHTS:
+            _load_module(target, state, file, name, what)
+        else:
+            try:
+                target.load_state_dict(state)  # optimisers: the state is checked against the parameters
+            except (RuntimeError, TypeError, ValueError, KeyError, IndexError):
+                raise ConfigError(file.path, f"{name}.pth", f"the optimiser state does not fit {what}; refused") from None
+    if policy_only:
+        return file if file.manifest is not None else None
+    saved = file.tensors(f"{VARIABLES}.pth", model.device) if variables else {}
+    for name in variables:
+        value = saved.get(name) if isinstance(saved, dict) else None
+        target = _attribute(model, name)
+        if value is None or getattr(value, "shape", None) != target.shape:
+            raise ConfigError(file.path, f"{VARIABLES}.pth", f"{name} is missing or misshapen; refused")
+        target.data.copy_(value)
+    model.num_timesteps = file.manifest.timesteps
+    model._n_updates = file.manifest.n_updates
+    return file
+
+
+def _attribute(model, dotted: str):
+    target = model
+    for part in dotted.split("."):
+        target = getattr(target, part)
+    return target

@@ -8,11 +8,17 @@ Run directory::
     OUT/eval.csv             every periodic evaluation of every stage
     OUT/report.md            the final evaluation table per stage, figures, throughput
     OUT/learning_curve.png   success rate and SPL against timesteps
-    OUT/stages/I-NAME/       checkpoints/last.zip (+ replay buffer), best.zip, policy.zip, tensorboard/
+    OUT/stages/I-NAME/       checkpoints/last.zip (+ last_replay.npz), best.zip, policy.zip, tensorboard/
+    OUT/.lock                held while a run works in the directory
 
 Periodic evaluations use the eval suite's *validation* draw (suite seeds from 0); the report's final
 evaluation uses a *test* draw (suite seeds from :data:`TEST_SEED_SHIFT`) of the same suite. Both
 are the eval split, disjoint from the training scenarios, and the test draw never chose a checkpoint.
+
+A run holds ``OUT/.lock`` (an OS file lock, released when the process ends, even by ``kill -9``),
+so a second run or resume of the same directory is refused instead of interleaving with it. A
+directory whose run died before its first checkpoint holds nothing worth keeping: the same
+command (or ``--resume``) starts it afresh.
 """
 
 from __future__ import annotations
@@ -20,23 +26,31 @@ from __future__ import annotations
 import csv
 import json
 import platform
+import shutil
 import subprocess
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import yaml
+from filelock import FileLock, Timeout
 
 import common
+from common.atomic import atomic_write
 from common.curriculum.hyperparams import resolve_hyperparams
-from common.curriculum.policy import Normalizer, PolicyAgent, algorithm_class, atomic_write, update_manifest
+from common.curriculum.policy import PolicyAgent, algorithm_class, load_weights
+from common.curriculum.policy_file import Normalizer, update_manifest
+from common.curriculum.replay import load_replay
 from common.curriculum.schema import CurriculumConfig, StageSpec
 from common.errors import ConfigError
 from common.evaluation import Summary, evaluate
 from common.generators import get_suite
 from common.observations import DEFAULT_GOAL_DISTANCE_SCALE
+from common.yaml_io import read_yaml
 
 TEST_SEED_SHIFT = 100_000
+LOCK_NAME = ".lock"
+_PREPARED = {"config.yaml", "run.json", "state.json", "eval.csv"}  # what prepare() writes before training
 EVAL_FIELDS = ["stage", "timesteps", "wall_time", "success_rate", "collision_rate", "timeout_rate", "stuck_rate",
                "spl", "mean_steps"]
 
@@ -82,7 +96,7 @@ class StagePaths:
 
     @property
     def replay(self) -> Path:
-        return self.root / "checkpoints" / "last_replay.pkl"
+        return self.root / "checkpoints" / "last_replay.npz"
 
     @property
     def best(self) -> Path:
@@ -144,6 +158,24 @@ def _env_id(stage: StageSpec) -> str:
     return "physics3d/WarehouseNav-v0"
 
 
+def _unstarted(out: Path) -> bool:
+    """Whether ``out`` holds only what a run writes before its first checkpoint (and at least that)."""
+    names = {p.name for p in out.iterdir()} - {LOCK_NAME}
+    if not names or not names - {"stages"} <= _PREPARED or not (out / "state.json").exists():
+        return False
+    if (out / "eval.csv").exists() and len((out / "eval.csv").read_text().splitlines()) > 1:
+        return False
+    stages = out / "stages"
+    # Before its first checkpoint a stage holds at most its TensorBoard log.
+    return not stages.exists() or all(p.name == "tensorboard" for stage in stages.iterdir() for p in stage.iterdir())
+
+
+def _clear_unstarted(out: Path) -> None:
+    for name in _PREPARED:
+        (out / name).unlink(missing_ok=True)
+    shutil.rmtree(out / "stages", ignore_errors=True)
+
+
 class Runner:
     """Runs a validated curriculum into a run directory."""
 
@@ -154,21 +186,40 @@ class Runner:
         self.progress = progress
         self.eval_log: EvalLog | None = None
         self.commit: str | None = None
+        self._lock: FileLock | None = None
 
     def prepare(self) -> dict:
-        """Create (or, resuming, reopen) the run directory; return the curriculum state."""
+        """Lock the run directory, create (or, resuming, reopen) it; return the curriculum state."""
         state_path = self.out / "state.json"
-        if self.resume:
-            if not state_path.exists():
-                raise ConfigError(self.out, None, "nothing to resume here (no state.json); run without --resume")
-            saved = yaml.safe_load((self.out / "config.yaml").read_text())
+        if self.resume and not state_path.exists():
+            raise ConfigError(self.out, None, "nothing to resume here (no state.json); run without --resume")
+        self.out.mkdir(parents=True, exist_ok=True)
+        self._lock = FileLock(self.out / LOCK_NAME)
+        try:
+            self._lock.acquire(timeout=0)
+        except Timeout:
+            raise ConfigError(self.out, None, "another run is using this directory; wait for it to finish or choose another --out") from None
+        try:
+            return self._open()
+        except BaseException:
+            self.release()
+            raise
+
+    def _open(self) -> dict:
+        state_path = self.out / "state.json"
+        fresh = _unstarted(self.out)
+        if fresh:
+            # A run that died before its first checkpoint (say, a missing dependency) left only
+            # what prepare() writes: nothing to keep, nothing to resume.
+            _clear_unstarted(self.out)
+        if self.resume and not fresh:
+            saved = read_yaml(self.out / "config.yaml")
             if saved != self.config.model_dump(mode="json"):
                 raise ConfigError(self.out, "config.yaml", "the curriculum changed since this run started; resume it with the same file")
             state = json.loads(state_path.read_text())
         else:
-            if self.out.exists() and any(self.out.iterdir()):
+            if any(p.name != LOCK_NAME for p in self.out.iterdir()):
                 raise ConfigError(self.out, None, "the run directory is not empty; pass --resume to continue it or choose another --out")
-            self.out.mkdir(parents=True, exist_ok=True)
             atomic_write(self.out / "config.yaml",
                          lambda tmp: tmp.write_text(yaml.safe_dump(self.config.model_dump(mode="json"), sort_keys=False)))
             _write_json(self.out / "run.json", self._provenance())
@@ -179,6 +230,11 @@ class Runner:
         # policy is saved (or the run resumed) after later commits.
         self.commit = json.loads((self.out / "run.json").read_text())["git_commit"]
         return state
+
+    def release(self) -> None:
+        """Let another run use the directory."""
+        if self._lock is not None:
+            self._lock.release()
 
     def _provenance(self) -> dict:
         import stable_baselines3
@@ -192,16 +248,19 @@ class Runner:
     def run(self) -> dict:
         """Train every stage not done yet; write the report; return the final state."""
         state = self.prepare()
-        for index, stage in enumerate(self.config.stages):
-            if stage.name in state["done"]:
-                continue
-            result = self._run_stage(index, stage, state)
-            state["stages"][stage.name] = result
-            state["done"].append(stage.name)
-            _write_json(self.out / "state.json", state)
-        from common.curriculum.report import write_report
+        try:
+            for index, stage in enumerate(self.config.stages):
+                if stage.name in state["done"]:
+                    continue
+                result = self._run_stage(index, stage, state)
+                state["stages"][stage.name] = result
+                state["done"].append(stage.name)
+                _write_json(self.out / "state.json", state)
+            from common.curriculum.report import write_report
 
-        write_report(self.out, self.config, state)
+            write_report(self.out, self.config, state)
+        finally:
+            self.release()
         return state
 
     def stage_paths(self, index: int, stage: StageSpec) -> StagePaths:
@@ -220,22 +279,21 @@ class Runner:
         seed = self.config.seed + index
         venv = make_vec_env(_env_id(stage), n_envs=stage.n_envs, seed=seed, env_kwargs=_make_env_kwargs(stage),
                             vec_env_cls=SubprocVecEnv if stage.vec_env == "subproc" else DummyVecEnv)
-        algo = algorithm_class(stage.algorithm)
         resuming = self.resume and paths.last.exists()
         if stage.normalize:
             venv = VecNormalize(venv, norm_obs=True, norm_reward=False)
-        if resuming:
-            model = algo.load(str(paths.last), env=venv, device=self.device)
-            if paths.replay.exists() and hasattr(model, "load_replay_buffer"):
-                model.load_replay_buffer(str(paths.replay))
-            self._restore_normalizer(model, paths.last, venv)
-        else:
-            model = algo("MlpPolicy", venv, seed=seed, device=self.device, verbose=0,
-                         tensorboard_log=str(paths.tensorboard), **resolve_hyperparams(stage.hyperparams))
-            source = self._init_source(index, stage)
-            if source is not None:
-                model.set_parameters(str(source), exact_match=True, device=self.device)
-                self._restore_normalizer(model, source, venv)
+        model = algorithm_class(stage.algorithm)("MlpPolicy", venv, seed=seed, device=self.device, verbose=0,
+                                                 tensorboard_log=str(paths.tensorboard),
+                                                 **resolve_hyperparams(stage.hyperparams))
+        # Both a resume and init_from load weights (never pickles) into the model the curriculum describes.
+        source = paths.last if resuming else self._init_source(index, stage)
+        if source is not None:
+            file = load_weights(model, source, policy_only=not resuming)
+            if resuming and paths.replay.exists() and hasattr(model, "replay_buffer"):
+                load_replay(model.replay_buffer, paths.replay)
+            normalizer = file.normalizer(venv.observation_space.shape[0]) if file is not None else None
+            if normalizer is not None and isinstance(venv, VecNormalize):
+                normalizer.apply_to(venv)
         already = int(model.num_timesteps)
         self.eval_log.truncate(stage.name, already)
         callback = CurriculumCallback(self, index, stage, paths)
@@ -261,21 +319,11 @@ class Runner:
             return self.stage_paths(index - 1, previous).policy
         return Path(stage.init_from)
 
-    @staticmethod
-    def _restore_normalizer(model, source: Path, venv) -> None:
-        from stable_baselines3.common.vec_env import VecNormalize
-
-        from common.curriculum.policy import read_manifest
-
-        _, normalizer = read_manifest(source)
-        if normalizer is not None and isinstance(venv, VecNormalize):
-            venv.obs_rms.mean, venv.obs_rms.var = normalizer.mean.copy(), normalizer.var.copy()
-
     def evaluate_model(self, model, stage: StageSpec, normalizer: Normalizer | None, episodes: int,
                        seed_shift: int) -> Summary:
         """Success and SPL of the current model on the stage's eval suite (a held-out draw)."""
         agent = PolicyAgent(model, stage.observation, DEFAULT_GOAL_DISTANCE_SCALE, normalizer, name=stage.name,
-                            action_mapping=stage.action_mapping)
+                            action_mapping=stage.action_mapping, max_steps=stage.max_steps)
         scenarios = get_suite(stage.eval.suite).scenarios(count=episodes, seed=seed_shift)
         (summary,) = evaluate([agent], scenarios, stage.world, seed=seed_shift, max_steps=stage.max_steps)
         return summary

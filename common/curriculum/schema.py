@@ -35,14 +35,15 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from common.actions import MAPPINGS
 from common.curriculum.hyperparams import resolve_hyperparams
 from common.curriculum.policy import algorithm_class
-from common.errors import ConfigError
+from common.curriculum.policy_file import ALGORITHMS
+from common.errors import ConfigError, quote
 from common.generators import KINDS, SUITES
 from common.observations import LAYOUTS
 from common.rewards import resolve_reward_spec
-from common.scenario import pydantic_error, read_yaml_mapping
+from common.scenario import pydantic_error
 from common.tiers import TIERS
+from common.yaml_io import read_yaml_mapping
 
-ALGORITHMS = ("ppo", "sac", "td3")
 
 
 class _Strict(BaseModel):
@@ -64,7 +65,7 @@ class ScenarioSpec(_Strict):
         if len(given) != 1:
             raise ValueError(f"give exactly one of kind, mix, suite or file (got {', '.join(given) or 'none'})")
         if self.suite is not None and self.suite not in SUITES:
-            raise ValueError(f"unknown suite {self.suite!r}; allowed: {', '.join(SUITES)}")
+            raise ValueError(f"unknown suite {quote(self.suite)}; allowed: {', '.join(SUITES)}")
         return self
 
 
@@ -80,7 +81,7 @@ class EvalSpec(_Strict):
     @classmethod
     def _known_suite(cls, value: str) -> str:
         if value not in SUITES:
-            raise ValueError(f"unknown suite {value!r}; allowed: {', '.join(SUITES)}")
+            raise ValueError(f"unknown suite {quote(value)}; allowed: {', '.join(SUITES)}")
         return value
 
 
@@ -139,9 +140,9 @@ def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
     if stage.init_from == "previous" and index == 0:
         raise ConfigError(source, f"{field}.init_from", "the first stage has no previous stage; allowed: null or a policy path")
     if stage.init_from not in (None, "previous") and not Path(stage.init_from).is_file():
-        raise ConfigError(source, f"{field}.init_from", f"no policy file {stage.init_from!r}; allowed: null, previous or a .zip path")
+        raise ConfigError(source, f"{field}.init_from", f"no policy file {quote(stage.init_from)}; allowed: null, previous or a .zip path")
     if stage.scenarios.file is not None and not Path(stage.scenarios.file).is_file():
-        raise ConfigError(source, f"{field}.scenarios.file", f"no such file {stage.scenarios.file!r}")
+        raise ConfigError(source, f"{field}.scenarios.file", f"no such file {quote(stage.scenarios.file)}")
 
 
 def curriculum_from_mapping(data: dict, source: str | Path | None = None) -> CurriculumConfig:

@@ -9,7 +9,9 @@ from typing import TYPE_CHECKING
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecNormalize
 
-from common.curriculum.policy import Normalizer, atomic_write, save_policy
+from common.atomic import atomic_write
+from common.curriculum.policy_file import Normalizer, save_policy
+from common.curriculum.replay import save_replay
 from common.curriculum.schema import StageSpec
 
 if TYPE_CHECKING:
@@ -76,8 +78,8 @@ class CurriculumCallback(BaseCallback):
         if summary.success_rate > self.best_success or not self.paths.best.exists():
             self.best_success = max(self.best_success, summary.success_rate)
             save_policy(model, self.paths.best, manifest, normalizer)
-        if hasattr(model, "save_replay_buffer"):
-            atomic_write(self.paths.replay, lambda tmp: model.save_replay_buffer(str(tmp)))
+        if hasattr(model, "replay_buffer"):
+            save_replay(model.replay_buffer, self.paths.replay)
         save_policy(model, self.paths.last, manifest, normalizer)
         threshold = self.stage.promote.success_rate if self.stage.promote else None
         self.promoted = threshold is not None and summary.success_rate >= threshold
