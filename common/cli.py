@@ -4,30 +4,36 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
+import warnings
+from pathlib import Path
+from typing import Callable, Sequence
 
 import numpy as np
-from pathlib import Path
-from typing import Sequence
 
-from common.errors import ConfigError
+from common.errors import ConfigError, ScenarioWarning
 
 EXIT_BAD_INPUT = 2
 
 
 def _validate(args: argparse.Namespace) -> int:
     from common.curriculum.schema import curriculum_from_mapping, is_curriculum
-    from common.scenario import read_yaml_mapping
-    from common.world_file import read_world_file
+    from common.world_file import WorldFile
+    from common.yaml_io import read_yaml_mapping
 
     for path in args.files:
         data = read_yaml_mapping(path)
         if is_curriculum(data):
             config = curriculum_from_mapping(data, path)
             print(f"ok: {path}: curriculum {config.name!r}, {len(config.stages)} stages")
-        else:
-            scenario = read_world_file(Path(path))
-            print(f"ok: {path}: scenario {scenario.name!r}, {len(scenario.obstacles)} obstacles")
+            continue
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", ScenarioWarning)
+            scenario = WorldFile(path).initial
+        for warning in caught:
+            print(f"warning: {warning.message}", file=sys.stderr)
+        print(f"ok: {path}: scenario {scenario.name!r}, {len(scenario.obstacles)} obstacles")
     return 0
 
 
@@ -52,6 +58,7 @@ def _eval(args: argparse.Namespace) -> int:
     from common.report import markdown_table
 
     agents = _policies(args.policy)
+    # Each policy runs episodes as long as it trained with, unless --max-steps says otherwise.
     summaries = evaluate(agents, _scenarios(args), args.world, seed=args.seed, max_steps=args.max_steps)
     if args.json:
         print(json.dumps(summaries[0].to_json() if len(summaries) == 1 else {s.agent: s.to_json() for s in summaries}))
@@ -85,21 +92,40 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
-def _scenarios(args: argparse.Namespace):
-    """The scenarios a compare/render run uses: a suite's, or a world file's (redrawn per seed)."""
+def _scenarios(args: argparse.Namespace, count: int | None = None):
+    """The scenarios an eval/compare/render run uses: a suite's, or a world file's (parsed once;
+    a file with random placements is drawn anew per episode, from seed S + i)."""
     from common.generators import get_suite
-    from common.world_file import read_world_file
+    from common.world_file import WorldFile
 
+    count = args.episodes if count is None else count
     if args.scenario_file:
-        return [read_world_file(Path(args.scenario_file), seed=args.seed + i) for i in range(args.episodes)]
-    return list(get_suite(args.suite).scenarios(count=args.episodes, seed=args.seed))
+        file = WorldFile(args.scenario_file)
+        return [file.scenario(args.seed + i) for i in range(count)]
+    return list(get_suite(args.suite).scenarios(count=count, seed=args.seed))
 
 
-def _agents(names: str | None):
+def _controllers(names: str | None, flag: str):
+    """Controllers by comma-separated names (all of them when ``names`` is None)."""
     from common.controllers import CONTROLLERS, make_controller
 
-    chosen = [n.strip() for n in names.split(",") if n.strip()] if names else list(CONTROLLERS)
-    return [make_controller(name, source="--controllers") for name in chosen]
+    if names is None:
+        return [make_controller(name) for name in CONTROLLERS]
+    chosen = [n.strip() for n in names.split(",") if n.strip()]
+    if not chosen:
+        raise ConfigError(None, flag, f"no controller named in {names!r}; allowed: a comma-separated list of {', '.join(CONTROLLERS)}")
+    return [make_controller(name, source=flag) for name in chosen]
+
+
+def _agent(spec: str):
+    """``--agent``: a controller name or a policy zip."""
+    from common.controllers import CONTROLLERS
+
+    if spec.endswith(".zip") or Path(spec).is_file():
+        return _policies([spec])[0]
+    if spec not in CONTROLLERS:
+        raise ConfigError(None, "--agent", f"{spec!r} is neither a controller ({', '.join(CONTROLLERS)}) nor a policy .zip")
+    return _controllers(spec, "--agent")[0]
 
 
 def _compare(args: argparse.Namespace) -> int:
@@ -109,7 +135,7 @@ def _compare(args: argparse.Namespace) -> int:
     from common.report import bar_chart, markdown_table, write_csv
 
     scenarios = _scenarios(args)
-    agents = _agents(args.controllers) + _policies(args.policy)
+    agents = _controllers(args.controllers, "--controllers") + _policies(args.policy)
     source = Path(args.scenario_file).stem if args.scenario_file else args.suite
     out = Path(args.out) if args.out else Path("runs") / "compare" / f"{args.world}-{source}"
     out.mkdir(parents=True, exist_ok=True)
@@ -122,35 +148,48 @@ def _compare(args: argparse.Namespace) -> int:
     (out / "comparison.md").write_text(table)
     write_csv(summaries, out / "episodes.csv")
     bar_chart(summaries, out / "comparison.png", title)
+    gifs = [_record(agent, scenarios[0], args, Path(args.gif) / f"{_file_name(agent.name)}.gif")[0]
+            for agent in agents] if args.gif else []
     if args.json:
         print(json.dumps({s.agent: s.to_json() for s in summaries}))
     else:
         print(table)
-        print(f"written: {out}/comparison.md, episodes.csv, comparison.png")
+        print(f"written: {out}/comparison.md, episodes.csv, comparison.png" + "".join(f", {gif}" for gif in gifs))
     return 0
 
 
-def _render(args: argparse.Namespace) -> int:
-    from common.evaluation import run_episode
-    from flatland.render import Renderer, plot_odometry_drift, save_gif
+def _file_name(name: str) -> str:
+    """An agent's name as a file name (policies are named curriculum/stage)."""
+    return "".join(c if c.isalnum() or c in "-_." else "-" for c in name)
 
-    args.episodes = args.index + 1
-    scenario = _scenarios(args)[args.index]
-    if args.encoder_noise is not None:
-        scenario = scenario.model_copy(update={"robot": scenario.robot.model_copy(update={"encoder_noise": args.encoder_noise})})
-    (agent,) = _agents(args.agent)
+
+def _record(agent, scenario, args: argparse.Namespace, gif: Path, every: int = 1):
+    """Drive one episode and write it as a GIF; return the GIF, the episode and both paths."""
+    from common.evaluation import run_episode
+    from flatland.render import Renderer, save_gif
+
     renderer = Renderer(scenario)
     frames, true_path, estimate = [], [], []
 
     def record(readings) -> None:
         true_path.append(readings.pose[:2])
         estimate.append(readings.odometry.pose[:2])
-        if len(true_path) % args.every == 1 or args.every == 1:
+        if len(true_path) % every == 1 or every == 1:
             renderer.draw(readings, true_path, caption=f"{agent.name}  t = {readings.time:.1f} s")
             frames.append(renderer.frame())
 
     episode = run_episode(agent, scenario, args.world, seed=args.seed, max_steps=args.max_steps, on_step=record)
-    gif = save_gif(frames, args.out, fps=10 / args.every)
+    return save_gif(frames, gif, fps=10 / every), episode, true_path, estimate
+
+
+def _render(args: argparse.Namespace) -> int:
+    from flatland.render import plot_odometry_drift
+
+    scenario = _scenarios(args, count=args.index + 1)[args.index]
+    if args.encoder_noise is not None:
+        scenario = scenario.model_copy(update={"robot": scenario.robot.model_copy(update={"encoder_noise": args.encoder_noise})})
+    agent = _agent(args.agent)
+    gif, episode, true_path, estimate = _record(agent, scenario, args, Path(args.out), args.every)
     print(f"{gif}: {agent.name} on {scenario.name}: {episode.outcome} after {episode.steps} steps, "
           f"{episode.path_length:.2f} m")
     if args.drift:
@@ -167,7 +206,8 @@ def _stderr_console():
     return Console(stderr=True)
 
 
-def _add_scenario_source(parser: argparse.ArgumentParser, episodes: int) -> None:
+def _add_scenario_source(parser: argparse.ArgumentParser, episodes: int | None) -> None:
+    """--world, --suite | --scenario-file, --seed, --max-steps, and --episodes unless ``episodes`` is None."""
     from common.generators import SUITES
     from common.tiers import TIERS
 
@@ -175,18 +215,37 @@ def _add_scenario_source(parser: argparse.ArgumentParser, episodes: int) -> None
     source = parser.add_mutually_exclusive_group()
     source.add_argument("--suite", default="sparse", choices=sorted(SUITES), help="a named suite (default sparse)")
     source.add_argument("--scenario-file", metavar="FILE", help="a scenario or IR-SIM world YAML")
-    parser.add_argument("--episodes", type=_positive_int, default=episodes, help=f"episodes (default {episodes})")
-    parser.add_argument("--seed", type=int, default=0, help="shifts the suite's base seed and the noise seeds")
-    parser.add_argument("--max-steps", type=_positive_int, default=500, help="steps before a timeout (default 500)")
+    if episodes is not None:
+        parser.add_argument("--episodes", type=_whole(1, 1_000_000), default=episodes, help=f"episodes (default {episodes})")
+    parser.add_argument("--seed", type=_whole(0, 2**32 - 1), default=0,
+                        help="shifts the suite's base seed and the noise seeds (0 to 2^32 - 1)")
+    parser.add_argument("--max-steps", type=_whole(1, 1_000_000), default=None,
+                        help="steps before a timeout (default: a policy's own episode length, else 500)")
 
 
-def _positive_int(text: str) -> int:
+def _whole(low: int, high: int) -> Callable[[str], int]:
+    """An argparse type: a whole number in [low, high] (argparse names the flag in its message)."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"must be from {low:,} to {high:,}, got {value:,}")
+        return value
+
+    return parse
+
+
+def _fraction(text: str) -> float:
+    """An argparse type: a finite number in [0, 1]."""
     try:
-        value = int(text)
+        value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (math.isfinite(value) and 0.0 <= value <= 1.0):
+        raise argparse.ArgumentTypeError(f"must be a number from 0 to 1, got {text}")
     return value
 
 
@@ -222,7 +281,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     bench = commands.add_parser("bench", help="measure simulator speed against references in the same run")
     bench.add_argument("--json", action="store_true", help="print one JSON object")
-    bench.add_argument("--steps", type=int, default=20_000, help="flatland steps to time (IR-SIM runs a tenth)")
+    bench.add_argument("--steps", type=_whole(100, 10_000_000), default=20_000,
+                       help="flatland steps to time, at least 100 (IR-SIM runs a tenth)")
     bench.set_defaults(handler=_bench)
 
     compare = commands.add_parser("compare", help="run agents on the same scenarios; Markdown, CSV, PNG and JSON")
@@ -230,17 +290,20 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument("--controllers", metavar="A,B,...", help="controllers to compare (default: all)")
     compare.add_argument("--policy", nargs="*", metavar="ZIP", help="trained policies to add as rows")
     compare.add_argument("--out", metavar="DIR", help="output directory (default runs/compare/WORLD-SOURCE)")
+    compare.add_argument("--gif", metavar="DIR", help="also record each agent's first episode as DIR/AGENT.gif")
     compare.add_argument("--json", action="store_true", help="print {agent: {success_rate, ...}} as JSON")
     compare.set_defaults(handler=_compare)
 
     render = commands.add_parser("render", help="record one episode of an agent as a GIF (and an odometry-drift plot)")
-    _add_scenario_source(render, episodes=1)
-    render.add_argument("--index", type=int, default=0, help="which scenario of the suite or file draw (default 0)")
-    render.add_argument("--agent", default="pid_blend", help="the controller to drive (default pid_blend)")
+    _add_scenario_source(render, episodes=None)
+    render.add_argument("--index", type=_whole(0, 1_000_000), default=0,
+                        help="which scenario of the suite or file draw (default 0)")
+    render.add_argument("--agent", default="pid_blend", help="a controller name or a policy zip (default pid_blend)")
     render.add_argument("--out", default="episode.gif", help="the GIF to write (default episode.gif)")
-    render.add_argument("--every", type=_positive_int, default=1, help="keep every k-th frame (default 1)")
+    render.add_argument("--every", type=_whole(1, 1000), default=1, help="keep every k-th frame (default 1)")
     render.add_argument("--drift", metavar="PNG", help="also plot the true path against wheel odometry")
-    render.add_argument("--encoder-noise", type=float, help="relative encoder noise for the episode (e.g. 0.02)")
+    render.add_argument("--encoder-noise", type=_fraction,
+                        help="relative encoder noise for the episode, 0 to 1 (e.g. 0.02)")
     render.set_defaults(handler=_render)
     return parser
 

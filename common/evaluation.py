@@ -27,11 +27,15 @@ STUCK_DISTANCE = 0.1  # m: an agent that moved less than this over the window is
 
 
 class Agent(Protocol):
-    """What the evaluator drives: the controller interface (policies are wrapped to it)."""
+    """What the evaluator drives: the controller interface (policies are wrapped to it).
+
+    ``bind`` tells the agent the robot, its lidar and the radius it must drive into; an agent may
+    also carry ``max_steps``, the episode length it expects (a policy's, from its manifest).
+    """
 
     name: str
 
-    def bind(self, robot: RobotProfile, lidar: LidarSpec) -> None: ...
+    def bind(self, robot: RobotProfile, lidar: LidarSpec, goal_threshold: float) -> None: ...
 
     def reset(self) -> None: ...
 
@@ -66,19 +70,26 @@ def shortest_path_length(scenario: Scenario, resolution: float = 0.1) -> float:
     return max(length - scenario.goal_threshold, 0.0)
 
 
+def episode_limit(agent: Agent, max_steps: int | None) -> int:
+    """``max_steps`` if given, else the agent's own episode length, else :data:`DEFAULT_MAX_STEPS`."""
+    return max_steps if max_steps is not None else getattr(agent, "max_steps", None) or DEFAULT_MAX_STEPS
+
+
 def run_episode(
     agent: Agent,
     scenario: Scenario,
     tier: str = "flatland",
     seed: int = 0,
-    max_steps: int = DEFAULT_MAX_STEPS,
+    max_steps: int | None = None,
     on_step: Callable[[Readings], None] | None = None,
     shortest: float | None = None,
 ) -> Episode:
-    """Drive ``agent`` in a fresh world of ``scenario``; ``on_step`` sees every readings (e.g. to render)."""
+    """Drive ``agent`` in a fresh world of ``scenario``; ``on_step`` sees every readings (e.g. to render).
+    ``max_steps`` defaults to the agent's own (see :func:`episode_limit`)."""
+    max_steps = episode_limit(agent, max_steps)
     world = make_world(tier, scenario, seed=seed)
     readings = world.reset(seed=seed)
-    agent.bind(scenario.robot, scenario.lidar)
+    agent.bind(scenario.robot, scenario.lidar, scenario.goal_threshold)
     agent.reset()
     if on_step:
         on_step(readings)
@@ -181,10 +192,11 @@ def evaluate(
     scenarios: Iterable[Scenario],
     tier: str = "flatland",
     seed: int = 0,
-    max_steps: int = DEFAULT_MAX_STEPS,
+    max_steps: int | None = None,
     progress: Callable[[int], None] | None = None,
 ) -> list[Summary]:
-    """Every agent on the same scenarios with the same seeds (episode i uses ``seed + i``)."""
+    """Every agent on the same scenarios with the same seeds (episode i uses ``seed + i``);
+    ``max_steps`` defaults to each agent's own (see :func:`episode_limit`)."""
     scenarios = list(scenarios)
     shortest = [shortest_path_length(s) for s in scenarios]
     results: dict[str, list[Episode]] = {a.name: [] for a in agents}

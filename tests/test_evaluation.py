@@ -18,7 +18,7 @@ class Scripted:
     def __init__(self, name: str, command: tuple[float, float] | None = None, via: tuple[float, float] | None = None):
         self.name, self.command, self.via = name, command, via
 
-    def bind(self, robot, lidar) -> None:
+    def bind(self, robot, lidar, goal_threshold) -> None:
         pass
 
     def reset(self) -> None:

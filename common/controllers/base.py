@@ -1,8 +1,9 @@
 """What every classical controller shares: the interface and the lidar geometry.
 
 A controller reads only what a real robot has (the odometry pose estimate, the lidar scan, the
-goal), so the same object drives the 2D and the 3D robot. ``bind`` tells it the robot's limits and
-where its lidar's beams point; ``reset`` starts an episode; ``act`` returns raw (v, w).
+goal), so the same object drives the 2D and the 3D robot. ``bind`` tells it the robot's limits,
+where its lidar's beams point and the goal's radius; ``reset`` starts an episode; ``act`` returns
+raw (v, w).
 """
 
 from __future__ import annotations
@@ -48,10 +49,20 @@ class Controller(ABC):
 
     name: str = "controller"
 
-    def bind(self, robot: RobotProfile, lidar: LidarSpec) -> None:
-        """Learn the robot's limits and the lidar's geometry (call before ``reset``)."""
+    def bind(self, robot: RobotProfile, lidar: LidarSpec, goal_threshold: float = 0.3) -> None:
+        """Learn the robot's limits, the lidar's geometry and how close to the goal counts as
+        arrived (call before ``reset``)."""
         self.robot = robot
         self.lidar = LidarGeometry(lidar)
+        self.goal_threshold = goal_threshold
+
+    def arrived(self, distance: float, stop_distance: float | None) -> bool:
+        """Whether to stand still at ``distance`` from the goal (by odometry).
+
+        ``stop_distance`` None means half the goal threshold: well inside it, so that the small
+        error of the odometry estimate does not leave the robot parked just outside.
+        """
+        return distance < (0.5 * self.goal_threshold if stop_distance is None else stop_distance)
 
     def reset(self) -> None:
         """Forget everything from the previous episode."""

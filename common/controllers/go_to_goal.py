@@ -23,7 +23,8 @@ class GoToGoal(Controller):
     Args:
         k_linear: forward gain, 1/s (0.5, the tutorial's).
         k_angular: turning gain, 1/s (2.0, the tutorial's).
-        stop_distance: within this many metres of the goal, stand still (0.3, the tutorial's).
+        stop_distance: within this many metres of the goal (by odometry), stand still; None (default):
+            half the scenario's goal threshold, so the robot drives into any goal radius.
         turn_in_place: scale v by max(0, cos e) (True). A forward-only robot with the bare law
             drives away from a goal behind it while it turns; with the factor it turns on the spot
             and the law is unchanged when the goal is straight ahead. False gives the tutorial's
@@ -32,7 +33,7 @@ class GoToGoal(Controller):
 
     name = "go_to_goal"
 
-    def __init__(self, k_linear: float = 0.5, k_angular: float = 2.0, stop_distance: float = 0.3,
+    def __init__(self, k_linear: float = 0.5, k_angular: float = 2.0, stop_distance: float | None = None,
                  turn_in_place: bool = True) -> None:
         self.k_linear = k_linear
         self.k_angular = k_angular
@@ -41,7 +42,7 @@ class GoToGoal(Controller):
 
     def act(self, readings: Readings, goal: tuple[float, float]) -> tuple[float, float]:
         distance, _, error = goal_polar(readings, goal)
-        if distance < self.stop_distance:
+        if self.arrived(distance, self.stop_distance):
             return 0.0, 0.0
         return self.clip(*self.goal_command(distance, error))
 

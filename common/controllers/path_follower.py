@@ -48,7 +48,8 @@ class PathFollower(Controller):
         replan_every: steps between routine replans (20).
         smooth: shortcut the planned path by line of sight (True).
         turn_in_place: heading error beyond which the robot turns on the spot, rad (pi/4).
-        stop_distance: within this many metres of the goal, stand still (0.1, IR-SIM's goal radius).
+        stop_distance: within this many metres of the goal (by odometry), stand still; None (default):
+            half the scenario's goal threshold, so the robot drives into any goal radius.
         seed: RRT's sampling seed (0).
     """
 
@@ -56,7 +57,7 @@ class PathFollower(Controller):
 
     def __init__(self, lookahead: float = 0.5, k_angular: float = 2.0, resolution: float = 0.2,
                  clearance: float = 0.1, replan_every: int = 20, smooth: bool = True,
-                 turn_in_place: float = math.pi / 4, stop_distance: float = 0.1, seed: int = 0) -> None:
+                 turn_in_place: float = math.pi / 4, stop_distance: float | None = None, seed: int = 0) -> None:
         self.name = f"{self.default_planner}_pursuit"
         self.seed = seed
         self.lookahead, self.k_angular = lookahead, k_angular
@@ -64,8 +65,8 @@ class PathFollower(Controller):
         self.replan_every, self.smooth, self.turn_in_place = replan_every, smooth, turn_in_place
         self.stop_distance = stop_distance
 
-    def bind(self, robot: RobotProfile, lidar: LidarSpec) -> None:
-        super().bind(robot, lidar)
+    def bind(self, robot: RobotProfile, lidar: LidarSpec, goal_threshold: float = 0.3) -> None:
+        super().bind(robot, lidar, goal_threshold)
         self.range_max = lidar.range_max
 
     def reset(self) -> None:
@@ -101,7 +102,7 @@ class PathFollower(Controller):
 
     def act(self, readings: Readings, goal: tuple[float, float]) -> tuple[float, float]:
         x, y, yaw = readings.odometry.pose
-        if math.hypot(goal[0] - x, goal[1] - y) < self.stop_distance:
+        if self.arrived(math.hypot(goal[0] - x, goal[1] - y), self.stop_distance):
             return 0.0, 0.0
         if self.mapper is None:
             self.mapper = self._make_mapper(x, y, goal)

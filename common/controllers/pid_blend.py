@@ -35,7 +35,8 @@ class PidHeadingBlend(Controller):
         front_half_angle: half-width of the front sector, radians (pi/2).
         side_half_angle: half-width of the left and right sectors, centred at ±90°, radians (pi/2).
         avoid_angle: the avoidance heading error, radians (pi/2: perpendicular to the robot's heading).
-        stop_distance: within this many metres of the goal, stand still (0.3).
+        stop_distance: within this many metres of the goal (by odometry), stand still; None (default):
+            half the scenario's goal threshold, so the robot drives into any goal radius.
         step_time: control period in seconds; None infers it from successive ``readings.time`` (None).
     """
 
@@ -44,7 +45,7 @@ class PidHeadingBlend(Controller):
     def __init__(self, kp: float = 1.0, ki: float = 0.1, kd: float = 0.1, integral_limit: float = 0.5,
                  speed: float = 0.5, k_distance: float = 0.5, safety_distance: float = 1.0,
                  front_half_angle: float = math.pi / 2, side_half_angle: float = math.pi / 2,
-                 avoid_angle: float = math.pi / 2, stop_distance: float = 0.3,
+                 avoid_angle: float = math.pi / 2, stop_distance: float | None = None,
                  step_time: float | None = None) -> None:
         self.kp, self.ki, self.kd = kp, ki, kd
         self.integral_limit = integral_limit
@@ -85,7 +86,7 @@ class PidHeadingBlend(Controller):
 
     def act(self, readings: Readings, goal: tuple[float, float]) -> tuple[float, float]:
         distance, _, goal_error = goal_polar(readings, goal)
-        if distance < self.stop_distance:
+        if self.arrived(distance, self.stop_distance):
             return 0.0, 0.0
         error = self.heading_error(readings, goal_error)
         dt = self._dt(readings.time)

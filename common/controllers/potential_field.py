@@ -37,13 +37,14 @@ class PotentialField(Controller):
         influence: d0, the clearance in metres beyond which returns do not repel (0.5).
         k_w: turning gain, 1/s (2.0).
         k_v: speed per unit of force along the heading, 1/s (0.5).
-        stop_distance: within this many metres of the goal, stand still (0.3).
+        stop_distance: within this many metres of the goal (by odometry), stand still; None (default):
+            half the scenario's goal threshold, so the robot drives into any goal radius.
     """
 
     name = "potential_field"
 
     def __init__(self, k_att: float = 1.0, k_rep: float = 0.002, influence: float = 0.5, k_w: float = 2.0,
-                 k_v: float = 0.5, stop_distance: float = 0.3) -> None:
+                 k_v: float = 0.5, stop_distance: float | None = None) -> None:
         self.k_att = k_att
         self.k_rep = k_rep
         self.influence = influence
@@ -51,8 +52,8 @@ class PotentialField(Controller):
         self.k_v = k_v
         self.stop_distance = stop_distance
 
-    def bind(self, robot: RobotProfile, lidar: LidarSpec) -> None:
-        super().bind(robot, lidar)
+    def bind(self, robot: RobotProfile, lidar: LidarSpec, goal_threshold: float = 0.3) -> None:
+        super().bind(robot, lidar, goal_threshold)
         self._beam_weight = lidar.angle_range / max(lidar.beams - 1, 1) / _REFERENCE_SPACING
 
     def force(self, readings: Readings, goal: tuple[float, float]) -> np.ndarray:
@@ -72,7 +73,7 @@ class PotentialField(Controller):
 
     def act(self, readings: Readings, goal: tuple[float, float]) -> tuple[float, float]:
         x, y, yaw = readings.odometry.pose
-        if math.hypot(goal[0] - x, goal[1] - y) < self.stop_distance:
+        if self.arrived(math.hypot(goal[0] - x, goal[1] - y), self.stop_distance):
             return 0.0, 0.0
         fx, fy = (float(f) for f in self.force(readings, goal))
         error = wrap_angle(math.atan2(fy, fx) - yaw)

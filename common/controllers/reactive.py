@@ -16,7 +16,7 @@ class ReactiveAvoidance(GoToGoal):
     ``avoid_v`` and turn at ``avoid_w`` away from the side that return is on (the 2D tutorial's rule).
 
     Args:
-        k_linear, k_angular, stop_distance, turn_in_place: as :class:`GoToGoal` (0.5, 2.0, 0.3, True).
+        k_linear, k_angular, stop_distance, turn_in_place: as :class:`GoToGoal` (0.5, 2.0, None, True).
         clearance: metres beyond the robot's radius that trigger avoidance (0.5, the tutorial's).
         front_half_angle: half-width of the watched sector, radians (pi/3, the tutorial's ±60°).
         avoid_v: forward speed while avoiding, m/s (0.1, the tutorial's).
@@ -25,7 +25,7 @@ class ReactiveAvoidance(GoToGoal):
 
     name = "reactive"
 
-    def __init__(self, k_linear: float = 0.5, k_angular: float = 2.0, stop_distance: float = 0.3,
+    def __init__(self, k_linear: float = 0.5, k_angular: float = 2.0, stop_distance: float | None = None,
                  turn_in_place: bool = True, clearance: float = 0.5, front_half_angle: float = math.pi / 3,
                  avoid_v: float = 0.1, avoid_w: float = 0.8) -> None:
         super().__init__(k_linear, k_angular, stop_distance, turn_in_place)
@@ -36,7 +36,7 @@ class ReactiveAvoidance(GoToGoal):
 
     def act(self, readings: Readings, goal: tuple[float, float]) -> tuple[float, float]:
         distance, _, error = goal_polar(readings, goal)
-        if distance < self.stop_distance:
+        if self.arrived(distance, self.stop_distance):
             return 0.0, 0.0
         nearest = self.nearest_front(readings.lidar)
         if nearest is not None and nearest[0] < self.robot.bounding_radius + self.clearance:
