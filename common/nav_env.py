@@ -54,7 +54,7 @@ class NavigationEnv(gym.Env):
             raise ValueError(f"render_mode {render_mode!r}; allowed: None, {', '.join(self.metadata['render_modes'])}")
         self.render_mode = render_mode
         self.source = scenario_source(world, difficulty, template, resample)
-        self.goal_threshold = _threshold_range(goal_threshold)
+        self.goal_threshold = threshold_range(goal_threshold)
         self.observation_name = observation
         self.action_mapping = action_mapping
         self.goal_distance_scale = goal_distance_scale
@@ -129,7 +129,7 @@ class NavigationEnv(gym.Env):
         return self._readings
 
 
-def _threshold_range(value: float | Sequence[float] | None) -> tuple[float, float] | None:
+def threshold_range(value: float | Sequence[float] | None) -> tuple[float, float] | None:
     """``goal_threshold`` as (low, high): None keeps each scenario's, a number fixes it, a pair is drawn
     from uniformly per episode (so a policy learns to arrive whatever radius it is judged by)."""
     if value is None:

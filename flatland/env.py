@@ -18,7 +18,8 @@ class NavEnv(NavigationEnv):
     a :class:`flatland.World` (``env.unwrapped.world``), built per episode from a scenario.
 
     ## Action Space
-    ``Box(-1, 1, (2,), float32)``: a[0] -> linear velocity v in [0, v_max] (forward only), a[1] ->
+    ``Box(-1, 1, (2,), float32)`` (finite values clipped into it; NaN, inf or another shape is a
+    ``ValueError``): a[0] -> linear velocity v in [0, v_max] (forward only), a[1] ->
     angular velocity w in [-w_max, w_max], with the scenario's robot limits (default 1 m/s, 1 rad/s).
     ``action_mapping="rectified"`` makes a[0] <= 0 a stop instead of spreading a[0] linearly.
 
@@ -45,13 +46,18 @@ class NavEnv(NavigationEnv):
     ## Arguments
     ``gymnasium.make("flatland/Nav-v0", world="sparse", observation="nav7", reward="tutorial2d",
     render_mode=None, max_steps=500, difficulty=0.5, goal_distance_scale=10.0, template=None,
-    action_mapping="linear")``
+    action_mapping="linear", resample=False,
+    goal_threshold=None)``
 
     * ``world``: a :class:`Scenario`, a list of them, a kind (``open``, ``sparse``, ``cluttered``,
       ``warehouse``, ``trap``) or the path of a scenario or IR-SIM world YAML.
     * ``render_mode``: ``None``, ``"human"`` (a matplotlib window) or ``"rgb_array"``.
     * ``difficulty``: 0 to 1, for generator kinds; ``template``: the robot, lidar and world size
       the generator uses.
+    * ``goal_threshold``: None (each scenario's goal radius), a radius in metres, or ``[low, high]``
+      drawn per episode from the env's seed (``info["goal_threshold"]`` at reset).
+    * ``resample``: redraw a random IR-SIM world file every episode instead of restoring its
+      initial state; ``reset(options={"resample": True})`` redraws once.
 
     ## Example
     >>> import gymnasium as gym, flatland

@@ -42,7 +42,8 @@ class WarehouseNavEnv(NavigationEnv):
     (``env.unwrapped.world``), built from the same scenarios as ``flatland/Nav-v0`` (twin worlds).
 
     ## Action Space
-    ``Box(-1, 1, (2,), float32)``: a[0] -> linear velocity v in [0, v_max] (forward only), a[1] ->
+    ``Box(-1, 1, (2,), float32)`` (finite values clipped into it; NaN, inf or another shape is a
+    ``ValueError``): a[0] -> linear velocity v in [0, v_max] (forward only), a[1] ->
     angular velocity w in [-w_max, w_max], with the scenario's robot limits (the 3D robot's
     default: 0.5 m/s, 1.5 rad/s), held as wheel velocity targets for one control period.
     ``action_mapping="rectified"`` makes a[0] <= 0 a stop instead of spreading a[0] linearly.
@@ -72,7 +73,8 @@ class WarehouseNavEnv(NavigationEnv):
     ## Arguments
     ``gymnasium.make("physics3d/WarehouseNav-v0", world="warehouse", observation="lidar43",
     reward="tutorial3d", render_mode=None, max_steps=500, difficulty=0.5, goal_distance_scale=10.0,
-    template=None, action_mapping="linear", camera=False, control_period=None)``
+    template=None, action_mapping="linear", camera=False, control_period=None, resample=False,
+    goal_threshold=None)``
 
     * ``world``: a :class:`Scenario`, a list of them, a kind (``open``, ``sparse``, ``cluttered``,
       ``warehouse``, ``trap``), a mix of kinds by weight, or the path of a scenario or IR-SIM
@@ -84,6 +86,10 @@ class WarehouseNavEnv(NavigationEnv):
     * ``camera``: add the camera images to the observation (about 10 ms a frame headless).
     * ``control_period``: seconds per step (default the scenario's ``step_time``, 0.1 s: 24
       physics sub-steps).
+    * ``goal_threshold``: None (each scenario's goal radius), a radius in metres, or ``[low, high]``
+      drawn per episode from the env's seed (``info["goal_threshold"]`` at reset).
+    * ``resample``: redraw a random IR-SIM world file every episode instead of restoring its
+      initial state; ``reset(options={"resample": True})`` redraws once.
 
     ## Example
     >>> import gymnasium as gym, physics3d

@@ -113,3 +113,66 @@ def test_render_writes_a_gif_and_the_drift_plot(tmp_path, capsys):
     with Image.open(gif) as image:
         assert image.n_frames > 3
     assert drift.stat().st_size > 1000 and "odometry drift" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("argv, expected", [
+    (["render", "--index", "-1"], "argument --index: must be from 0"),
+    (["eval", "--policy", "p.zip", "--seed", "-1"], "argument --seed: must be from 0"),
+    (["bench", "--steps", "0"], "argument --steps: must be from 100"),
+    (["render", "--encoder-noise", "nan"], "argument --encoder-noise: must be a number from 0 to 1, got nan"),
+    (["render", "--encoder-noise", "-1"], "argument --encoder-noise: must be a number from 0 to 1"),
+    (["render", "--episodes", "3"], "unrecognized arguments: --episodes 3"),
+    (["compare", "--controllers", ",,,"], "--controllers: no controller named in ',,,'"),
+    (["compare", "--max-steps", "0"], "argument --max-steps: must be from 1"),
+])
+def test_every_bad_argument_names_its_flag(argv, expected, capsys):
+    try:
+        code = main(argv)
+    except SystemExit as exit_:  # argparse's usage errors exit; input errors return
+        code = exit_.code
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and expected in err, err
+
+
+def test_render_drives_a_policy_and_compare_writes_a_gif_per_agent(untrained_policy, tmp_path, capsys):
+    gif = tmp_path / "policy.gif"
+    assert main(["render", "--suite", "open", "--agent", str(untrained_policy), "--out", str(gif)]) == 0
+    out = capsys.readouterr().out
+    from PIL import Image
+
+    with Image.open(gif) as image:
+        # The manifest's 30-step episodes: at most 31 frames (the start and one per step).
+        assert 2 < image.n_frames <= 31
+    assert "untrained on" in out
+    folder = tmp_path / "gifs"
+    assert main(["compare", "--suite", "open", "--episodes", "1", "--controllers", "go_to_goal", "--policy",
+                 str(untrained_policy), "--gif", str(folder), "--out", str(tmp_path / "cmp")]) == 0
+    assert sorted(p.name for p in folder.iterdir()) == ["go_to_goal.gif", "untrained.gif"]
+
+
+def test_eval_runs_episodes_as_long_as_the_policy_trained_with(untrained_policy, tmp_path, capsys):
+    assert main(["compare", "--suite", "open", "--episodes", "3", "--controllers", "pid_blend", "--policy",
+                 str(untrained_policy), "--out", str(tmp_path / "cmp")]) == 0
+    import csv
+
+    rows = list(csv.DictReader((tmp_path / "cmp" / "episodes.csv").open()))
+    policy_steps = [int(r["steps"]) for r in rows if r["agent"] == "untrained"]
+    assert len(policy_steps) == 3 and max(policy_steps) <= 30, policy_steps
+    assert main(["compare", "--suite", "open", "--episodes", "1", "--controllers", "pid_blend", "--policy",
+                 str(untrained_policy), "--max-steps", "5", "--out", str(tmp_path / "cmp5")]) == 0
+    rows = list(csv.DictReader((tmp_path / "cmp5" / "episodes.csv").open()))
+    assert all(int(r["steps"]) <= 5 for r in rows)
+
+
+def test_controllers_and_policies_arrive_on_an_irsim_world_with_its_default_goal_radius(tmp_path, capsys):
+    world = tmp_path / "irsim.yaml"
+    # No goal_threshold: IR-SIM's default, 0.1 m. Controllers used to stop 0.3 m short and be scored stuck.
+    world.write_text("world: {height: 10, width: 10}\nrobot:\n  kinematics: {name: diff}\n  shape: {name: circle, radius: 0.2}\n"
+                     "  state: [1, 1, 0]\n  goal: [8, 8, 0]\n"
+                     "  sensors: [{name: lidar2d, range_max: 5, angle_range: 6.283, number: 36}]\n"
+                     "obstacle:\n  - shape: {name: circle, radius: 0.5}\n    state: [6, 3, 0]\n")
+    assert main(["compare", "--scenario-file", str(world), "--episodes", "1", "--controllers",
+                 "go_to_goal,reactive,potential_field,pid_blend,astar_pursuit,rrt_pursuit", "--out", str(tmp_path / "o"),
+                 "--json"]) == 0
+    results = json.loads(capsys.readouterr().out)
+    assert {name: figures["success_rate"] for name, figures in results.items()} == dict.fromkeys(results, 1.0)

@@ -188,3 +188,14 @@ def test_bad_parameters_are_one_line_config_errors(name, params, field, problem)
     assert error.source == "run.yaml" and error.field == field and problem in error.problem
     assert "\n" not in str(error) and str(error).startswith(f"run.yaml: {field}: ")
 
+
+
+@pytest.mark.parametrize("name", list(CONTROLLERS))
+@pytest.mark.parametrize("threshold", [0.1, 0.5])
+def test_every_controller_drives_into_the_scenarios_goal_radius(name, threshold):
+    from common.evaluation import run_episode
+
+    # The goal off the start's heading: the controller must turn, then close in on it.
+    scenario = Scenario(start=(1.0, 2.0, 0.0), goal=(8.0, 7.0), goal_threshold=threshold)
+    episode = run_episode(make_controller(name), scenario, max_steps=400)
+    assert episode.outcome == "success", (name, episode)

@@ -68,18 +68,21 @@ def _shape(root: Path) -> set[str]:
 
 
 def _run(out: Path, *extra: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "common.cli", "run", str(TINY), "--out", str(out), "--no-progress", *extra],
+    return subprocess.Popen([sys.executable, "-m", "common.cli", "run", str(TINY), "--out", str(out), *extra],
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
 
 @pytest.mark.slow
 def test_run_writes_every_artefact_and_resumes_after_kill(tmp_path):
     whole = tmp_path / "whole"
-    assert _run(whole).wait(timeout=300) == 0
+    # With the progress bar (SB3 needs tqdm and rich for it) and TensorBoard logging, as a user runs it.
+    finished = _run(whole)
+    assert finished.wait(timeout=300) == 0, finished.stdout.read()
     expected = {"config.yaml", "run.json", "state.json", "eval.csv", "report.md", "learning_curve.png",
                 "stages/0-open/checkpoints/last.zip", "stages/0-open/best.zip", "stages/0-open/policy.zip",
                 "stages/0-open/final_eval.json", "stages/1-sparse/policy.zip"}
     assert expected <= _shape(whole)
+    assert any((whole / "stages/0-open/tensorboard").rglob("events.out.tfevents.*"))
     run = json.loads((whole / "run.json").read_text())
     assert run["package_version"] and "git_commit" in run and run["seed"] == 0
     assert "| open | ppo | nav7 | 6,144 |" in (whole / "report.md").read_text()
@@ -90,7 +93,7 @@ def test_run_writes_every_artefact_and_resumes_after_kill(tmp_path):
     assert manifest["final_eval"]["draw"] == "test" and manifest["final_eval"]["episodes"] == 6
 
     killed = tmp_path / "killed"
-    process = _run(killed)
+    process = _run(killed, "--no-progress")
     last = killed / "stages/0-open/checkpoints/last.zip"
     deadline = time.time() + 240
     while not last.exists() and time.time() < deadline and process.poll() is None:
@@ -99,11 +102,12 @@ def test_run_writes_every_artefact_and_resumes_after_kill(tmp_path):
     os.kill(process.pid, signal.SIGKILL)
     process.wait()
     assert not (killed / "report.md").exists()
+    assert (killed / ".lock").exists()  # the killed run's lock file stays; its OS lock died with it
     before = (killed / "eval.csv").read_text()
     # As if commits landed between the kill and the resume: the policies keep the run's start commit.
     provenance = json.loads((killed / "run.json").read_text())
     (killed / "run.json").write_text(json.dumps({**provenance, "git_commit": "commit-at-start"}))
-    resumed = _run(killed, "--resume")
+    resumed = _run(killed, "--resume", "--no-progress")
     assert resumed.wait(timeout=300) == 0, resumed.stdout.read()
     assert _shape(killed) == _shape(whole)
     assert read_manifest(killed / "stages/1-sparse/policy.zip")["git_commit"] == "commit-at-start"

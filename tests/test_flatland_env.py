@@ -140,3 +140,57 @@ def test_rectified_mapping_stands_still_on_the_lower_half_of_the_range():
 
     mapping = ActionMapping(Scenario().robot, "rectified")
     assert mapping.to_velocity(mapping.to_action(0.3, -0.2)) == pytest.approx((0.3, -0.2))
+
+
+RANDOM_WORLD = ("world: {width: 10, height: 10}\nrobot:\n  kinematics: {name: diff}\n  state: [1, 1, 0]\n  goal: [9, 9, 0]\n"
+                "obstacle:\n  - number: 6\n    distribution: {name: random, range_low: [3, 3, 0], range_high: [7, 7, 0]}\n"
+                "    shape: {name: circle, radius: 0.3}\n")
+
+
+def test_a_random_irsim_world_restores_its_initial_state_unless_resampled(tmp_path, monkeypatch):
+    import common.world_file as world_file
+
+    path = tmp_path / "random.yaml"
+    path.write_text(RANDOM_WORLD)
+    reads = []
+    read = world_file.read_yaml_mapping
+    monkeypatch.setattr(world_file, "read_yaml_mapping", lambda p: reads.append(p) or read(p))
+    env = make(world=str(path))
+    env.reset(seed=0)
+    initial = env.unwrapped.scenario
+    for options in ({"seed": 0}, {"seed": 7}, {}):
+        env.reset(**options)
+        assert env.unwrapped.scenario is initial  # IR-SIM's reset(): back to the initial state
+    env.reset(options={"resample": True})  # IR-SIM's reset(random=True)
+    assert env.unwrapped.scenario.obstacles != initial.obstacles
+    env.reset()
+    assert env.unwrapped.scenario is initial
+    resampling = make(world=str(path), resample=True)
+    layouts = []
+    for seed in (1, None, None, 1):
+        resampling.reset(seed=seed)
+        layouts.append(resampling.unwrapped.scenario.obstacles)
+    assert layouts[0] != layouts[1] != layouts[2] and layouts[0] == layouts[3]  # new per episode, seeded
+    assert len(reads) == 2  # each env read and parsed the file once
+
+
+def test_goal_threshold_option_fixes_or_draws_the_goal_radius():
+    scenario = Scenario(start=(1, 5, 0), goal=(2, 5), goal_threshold=0.25)
+
+    def steps_to_goal(**kwargs) -> tuple[int, float]:
+        env = make(world=scenario, **kwargs)
+        _, info = env.reset(seed=0)
+        for step in range(1, 50):
+            *_, terminated, _, _ = env.step(np.array([1.0, 0.0], dtype=np.float32))
+            if terminated:
+                return step, info["goal_threshold"]
+        raise AssertionError("never arrived")
+
+    assert steps_to_goal() == (8, 0.25)  # 0.1 m per step: inside 0.25 m after 8 steps
+    assert steps_to_goal(goal_threshold=0.12) == (9, 0.12)
+    drawn = make(world=scenario, goal_threshold=[0.1, 0.5])
+    radii = [drawn.reset(seed=seed)[1]["goal_threshold"] for seed in range(20)]
+    assert all(0.1 <= r <= 0.5 for r in radii) and len(set(radii)) == 20
+    assert radii == [drawn.reset(seed=seed)[1]["goal_threshold"] for seed in range(20)]
+    with pytest.raises(ValueError, match="goal_threshold"):
+        make(world=scenario, goal_threshold=[0.5, 0.1])

@@ -145,7 +145,7 @@ def _make_env_kwargs(stage: StageSpec) -> dict:
     spec = stage.scenarios
     world = spec.kind or spec.mix or spec.suite or spec.file
     return dict(world=world, observation=stage.observation, reward=stage.reward, max_steps=stage.max_steps,
-                difficulty=spec.difficulty, action_mapping=stage.action_mapping)
+                difficulty=spec.difficulty, action_mapping=stage.action_mapping, **stage.env_kwargs)
 
 
 def _env_id(stage: StageSpec) -> str:
@@ -347,7 +347,7 @@ def manifest_for(runner: Runner, index: int, stage: StageSpec, timesteps: int, w
     """What a policy zip says about itself."""
     return {"algorithm": stage.algorithm, "observation": stage.observation,
             "goal_distance_scale": DEFAULT_GOAL_DISTANCE_SCALE, "action_mapping": stage.action_mapping,
-            "max_steps": stage.max_steps, "curriculum": runner.config.name, "stage": stage.name,
+            "max_steps": stage.max_steps, "env_kwargs": stage.env_kwargs, "curriculum": runner.config.name, "stage": stage.name,
             "stage_index": index, "seed": runner.config.seed + index, "git_commit": runner.commit,
             "package_version": common.__version__, "timesteps": timesteps, "wall_time_s": round(wall_time, 1),
             "eval": evaluation}

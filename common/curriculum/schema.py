@@ -21,6 +21,7 @@ stages:
     eval: {suite: sparse, episodes: 100, every: 50000}
     promote: {success_rate: 0.95}   # end the stage early when the evaluation reaches it
     init_from: null      # null | previous | path/to/policy.zip
+    env_kwargs: {goal_threshold: [0.1, 0.5]}   # further env arguments (not those the keys above set)
 ```
 """
 
@@ -110,6 +111,7 @@ class StageSpec(_Strict):
     eval: EvalSpec
     promote: PromoteSpec | None = None
     init_from: str | None = None
+    env_kwargs: dict[str, Any] = {}
 
 
 class CurriculumConfig(_Strict):
@@ -122,6 +124,22 @@ class CurriculumConfig(_Strict):
 
 
 _MANAGED = {"policy", "env", "seed", "device", "verbose", "tensorboard_log", "_init_setup_model"}
+# Env arguments a stage sets through its own keys (world from scenarios, and so on), or that YAML
+# cannot or must not set (a template is a Scenario object; the manifest fixes the distance scale).
+_NOT_ENV_KWARGS = {"self", "world", "observation", "reward", "max_steps", "difficulty", "action_mapping", "render_mode",
+                   "kwargs", "template", "goal_distance_scale"}
+
+
+def env_arguments(tier: str) -> set[str]:
+    """The keyword arguments a tier's env takes beyond those a stage sets through its own keys."""
+    from common.nav_env import NavigationEnv
+
+    names = set(inspect.signature(NavigationEnv.__init__).parameters)
+    if tier == "physics3d":
+        from physics3d.env import WarehouseNavEnv
+
+        names |= set(inspect.signature(WarehouseNavEnv.__init__).parameters)
+    return names - _NOT_ENV_KWARGS
 
 
 def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
@@ -137,6 +155,17 @@ def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
             raise ConfigError(source, f"{field}.hyperparams.{key}",
                               f"not a {stage.algorithm.upper()} argument; allowed: {', '.join(sorted(allowed))}")
     resolve_hyperparams(stage.hyperparams, source=source, field=f"{field}.hyperparams")
+    allowed_env = env_arguments(stage.world)
+    for key in stage.env_kwargs:
+        if key not in allowed_env:
+            raise ConfigError(source, f"{field}.env_kwargs.{key}", f"not a {stage.world} env argument; allowed: {', '.join(sorted(allowed_env))}")
+    if "goal_threshold" in stage.env_kwargs:
+        from common.nav_env import threshold_range
+
+        try:
+            threshold_range(stage.env_kwargs["goal_threshold"])
+        except ConfigError as error:
+            raise ConfigError(source, f"{field}.env_kwargs.goal_threshold", error.problem) from None
     if stage.init_from == "previous" and index == 0:
         raise ConfigError(source, f"{field}.init_from", "the first stage has no previous stage; allowed: null or a policy path")
     if stage.init_from not in (None, "previous") and not Path(stage.init_from).is_file():

@@ -1,0 +1,68 @@
+"""The project's promises about itself: the README's commands, CI, and declared dependencies."""
+
+from __future__ import annotations
+
+import ast
+import importlib.metadata
+import re
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("common", "flatland", "physics3d")
+
+
+def _readme_commands() -> list[str]:
+    block = re.search(r"```bash\n(.*?)```", (ROOT / "README.md").read_text(), re.S)
+    assert block, "the README starts with a bash block of the two set-up commands"
+    return [line.strip() for line in block.group(1).splitlines() if line.strip()]
+
+
+def test_readme_starts_with_the_main_job_and_the_tests_and_ci_runs_the_second():
+    main_job, tests = _readme_commands()[:2]
+    assert main_job.endswith("curriculum run curricula/stage1_2d.yaml") and "venv" in main_job
+    assert tests.endswith("python -m pytest -n auto") and "venv" in tests
+    ci = (ROOT / ".ci" / "run").read_text()
+    assert tests in ci.splitlines(), "CI must run the README's test command as it is written"
+    assert "rm -rf .venv" in ci, "CI must install into a new virtual environment every run"
+
+
+def _declared() -> set[str]:
+    import tomllib
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    return {re.split(r"[<>=!~\[; ]", requirement, maxsplit=1)[0].lower().replace("_", "-")
+            for requirement in project["dependencies"]}
+
+
+def _third_party_imports() -> set[str]:
+    names = set()
+    for package in PACKAGES:
+        for path in (ROOT / package).rglob("*.py"):
+            for node in ast.walk(ast.parse(path.read_text())):
+                if isinstance(node, ast.Import):
+                    names |= {alias.name.split(".")[0] for alias in node.names}
+                elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                    names.add(node.module.split(".")[0])
+    return {n for n in names if n not in sys.stdlib_module_names and n not in PACKAGES}
+
+
+# Imported only inside optional paths (the IR-SIM comparison in `curriculum bench`), under the `irsim` extra.
+OPTIONAL = {"irsim"}
+
+
+def test_every_package_the_code_imports_is_a_declared_dependency():
+    distributions = importlib.metadata.packages_distributions()
+    declared = _declared()
+    missing = {}
+    for module in _third_party_imports() - OPTIONAL:
+        providers = {d.lower().replace("_", "-") for d in distributions.get(module, [module])}
+        if not providers & declared:
+            missing[module] = sorted(providers)
+    assert not missing, f"imported but not in pyproject's dependencies: {missing}"
+
+
+def test_what_stable_baselines3_needs_for_our_runs_is_declared():
+    # A run logs to TensorBoard and shows SB3's progress bar: SB3 imports these only then, so a
+    # missing one passed every import check and failed a new user's first run.
+    assert {"tensorboard", "tqdm", "rich"} <= _declared()
