@@ -101,8 +101,12 @@ def _scenarios(args: argparse.Namespace, count: int | None = None):
     count = args.episodes if count is None else count
     if args.scenario_file:
         file = WorldFile(args.scenario_file)
-        return [file.scenario(args.seed + i) for i in range(count)]
-    return list(get_suite(args.suite).scenarios(count=count, seed=args.seed))
+        scenarios = [file.scenario(args.seed + i) for i in range(count)]
+    else:
+        scenarios = list(get_suite(args.suite).scenarios(count=count, seed=args.seed))
+    if args.goal_threshold is not None:
+        scenarios = [s.model_copy(update={"goal_threshold": args.goal_threshold}) for s in scenarios]
+    return scenarios
 
 
 def _controllers(names: str | None, flag: str):
@@ -221,6 +225,8 @@ def _add_scenario_source(parser: argparse.ArgumentParser, episodes: int | None) 
                         help="shifts the suite's base seed and the noise seeds (0 to 2^32 - 1)")
     parser.add_argument("--max-steps", type=_whole(1, 1_000_000), default=None,
                         help="steps before a timeout (default: a policy's own episode length, else 500)")
+    parser.add_argument("--goal-threshold", type=_radius, metavar="M",
+                        help="judge arrival within M metres instead of each scenario's goal radius")
 
 
 def _whole(low: int, high: int) -> Callable[[str], int]:
@@ -236,6 +242,17 @@ def _whole(low: int, high: int) -> Callable[[str], int]:
         return value
 
     return parse
+
+
+def _radius(text: str) -> float:
+    """An argparse type: a goal radius, a finite number of metres in (0, 1000]."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of metres, got {text!r}") from None
+    if not (math.isfinite(value) and 0.0 < value <= 1000.0):
+        raise argparse.ArgumentTypeError(f"must be more than 0 and at most 1000 m, got {text}")
+    return value
 
 
 def _fraction(text: str) -> float:

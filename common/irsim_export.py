@@ -41,7 +41,10 @@ def scenario_to_irsim(scenario: Scenario) -> dict[str, Any]:
         "vel_max": [robot.v_max, robot.w_max],
         "sensors": [{
             "name": "lidar2d", "range_min": lidar.range_min, "range_max": lidar.range_max,
-            "angle_range": lidar.angle_range, "number": lidar.beams, "offset": list(lidar.offset),
+            # IR-SIM spreads beams over linspace(-range/2, range/2): a full circle's evenly spaced
+            # beams are that over 2π(n - 1)/n, the same directions.
+            "angle_range": 2 * math.pi - lidar.beam_spacing if lidar.full_circle else lidar.angle_range,
+            "number": lidar.beams, "offset": list(lidar.offset),
             "noise": lidar.noise_std > 0, "std": lidar.noise_std,
         }],
     }

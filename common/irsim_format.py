@@ -625,6 +625,7 @@ def _lidar(entry: Entry, path: str) -> LidarSpec:
         "angle_range": _Value(angle_range, at("angle_range")),
         "offset": _Value(offset, at("offset")),
         "noise_std": _Value(std if noisy else 0.0, at("std")),
+        "repeat_end_beam": _Value(True, sensor_path),  # IR-SIM's linspace layout, for parity
     }
     return _build(LidarSpec, sensor_path, fields)
 

@@ -40,7 +40,7 @@ class NavigationEnv(gym.Env):
         self,
         world: Scenario | str | Path | Sequence[Scenario] | ScenarioSource = "sparse",
         observation: str = "nav7",
-        reward: str | Mapping[str, Any] = "tutorial2d",
+        reward: str | Mapping[str, Any] = "default",
         render_mode: str | None = None,
         max_steps: int = 500,
         difficulty: float = 0.5,
@@ -64,6 +64,7 @@ class NavigationEnv(gym.Env):
         self._load(self.source.draw(np.random.default_rng(0)))
         self.observation_space = self.layout.space
         self._readings: Readings | None = None
+        self._pending_rng: dict | None = None
         self._steps = 0
         self._prev_distance = 0.0
         self.trajectory: list[tuple[float, float]] = []
@@ -89,6 +90,8 @@ class NavigationEnv(gym.Env):
         """Start an episode; ``options={"resample": True}`` redraws a random world file's layout
         (IR-SIM's ``reset(random=True)``) where a plain reset restores its initial state."""
         super().reset(seed=seed)
+        if self._pending_rng is not None:
+            self.np_random.bit_generator.state, self._pending_rng = self._pending_rng, None
         scenario = self.source.draw(self.np_random, resample=bool((options or {}).get("resample", False)))
         if scenario is not self.scenario:
             self._load(scenario)
@@ -122,6 +125,15 @@ class NavigationEnv(gym.Env):
         if self.render_mode == "human":
             self.render()
         return self.layout(readings, self._goal), float(reward), terminated, truncated, info
+
+    def rng_state(self) -> dict:
+        """The state of the env's random generator (JSON-able): what the next reset will draw from."""
+        return self.np_random.bit_generator.state
+
+    def restore_rng(self, state: dict) -> None:
+        """Make the next reset continue from ``state`` (whatever seed it is given), so a resumed
+        run draws the scenarios the interrupted one would have drawn next."""
+        self._pending_rng = state
 
     @property
     def readings(self) -> Readings | None:

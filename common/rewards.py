@@ -3,19 +3,20 @@
 A reward is a mapping of term name -> weight (or ``{weight: w, <param>: value}``); each term is a
 small function of a :class:`StepContext` returning an unweighted value, and :class:`Reward` sums
 ``weight * term`` and reports every weighted share, so ``info["reward_terms"]`` shows what the
-agent was paid for. Presets reproduce the two tutorials' final rewards.
+agent was paid for. ``default`` is the envs' default; the tutorial presets reproduce the two
+tutorials' final rewards.
 """
 
 from __future__ import annotations
 
 import collections
 import functools
-import inspect
 import math
 from pathlib import Path
 from typing import Any, Callable, Mapping, NamedTuple
 
 from common.errors import ConfigError, quote
+from common.params import coerce, keyword_parameters
 
 
 class StepContext(NamedTuple):
@@ -62,7 +63,7 @@ def proximity(ctx: StepContext, threshold: float = 0.3) -> float:
     return max(0.0, threshold - ctx.min_range)
 
 
-def proximity_bands(ctx: StepContext, bands: tuple = ((0.3, 5.0), (0.5, 1.0))) -> float:
+def proximity_bands(ctx: StepContext, bands: tuple[tuple[float, float], ...] = ((0.3, 5.0), (0.5, 1.0))) -> float:
     """The value of the first (distance, value) band whose distance exceeds the nearest return."""
     for distance, value in bands:
         if ctx.min_range < distance:
@@ -106,7 +107,19 @@ TERMS: dict[str, Callable[..., Any]] = {
 STATEFUL = {"stuck"}
 
 PRESETS: dict[str, dict[str, Any]] = {
-    # 2D tutorial, reward v2: progress-based, spin and proximity penalties, goal bonus.
+    # The envs' default, and what every shipped curriculum trains with: signed progress (a loop
+    # nets nothing, the time term makes it cost), a crash costing what the goal pays, and a small
+    # price for closing within 0.5 m of an obstacle (docs/training.md measures each piece).
+    "default": {
+        "progress": 10.0,
+        "goal": 100.0,
+        "collision": -100.0,
+        "time": -0.05,
+        "proximity": {"weight": -5.0, "threshold": 0.5},
+    },
+    # 2D tutorial, reward v2: progress-based, spin and proximity penalties, goal bonus. Kept as the
+    # tutorial had it, flaw included: paying only for gains, a loop earns on every approach and
+    # loses nothing on the way back, and a crash ends the proximity penalties.
     "tutorial2d": {
         "progress": {"weight": 10.0, "positive_only": True},
         "spin": {"weight": -5.0, "threshold": 0.8},
@@ -176,9 +189,14 @@ def resolve_reward_spec(spec: str | Mapping[str, Any], source: str | Path | None
         weight = entry.get("weight")
         if isinstance(weight, bool) or not isinstance(weight, (int, float)) or not math.isfinite(weight):
             raise ConfigError(source, f"{field}.weight", f"expected a finite number, got {quote(weight)}")
-        allowed = [p for p in inspect.signature(TERMS[name]).parameters if p != "ctx"]
-        for param in entry:
-            if param != "weight" and param not in allowed:
-                raise ConfigError(source, f"{field}.{param}", f"unknown parameter; allowed: weight, {', '.join(allowed)}" if allowed else "unknown parameter; allowed: weight")
+        allowed = keyword_parameters(TERMS[name])
+        for param, value in list(entry.items()):
+            if param == "weight":
+                continue
+            if param not in allowed:
+                names = ", ".join(["weight", *allowed])
+                raise ConfigError(source, f"{field}.{param}", f"unknown parameter; allowed: {names}")
+            annotation, default = allowed[param]
+            entry[param] = coerce(value, annotation, default, source, f"{field}.{param}")
         resolved[name] = entry
     return resolved

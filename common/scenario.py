@@ -170,6 +170,11 @@ class LidarSpec(_Frozen):
 
     ``offset`` is the mount (x, y, yaw) in the robot frame. Ranges are clipped to
     [range_min, range_max]; a beam that hits nothing reads ``range_max``.
+
+    Beams run from -angle_range/2 to +angle_range/2 with both ends included, except on a full
+    circle, where n beams are spaced 2π/n, centred on the heading (at ±π/n, ±3π/n, ...), so no
+    direction is read twice. ``repeat_end_beam`` keeps IR-SIM's layout on a full circle too (both
+    ends, so its ±π beam is read twice): IR-SIM world files set it, for parity with IR-SIM.
     """
 
     beams: Annotated[int, Field(ge=1, le=4096)] = 36
@@ -178,6 +183,7 @@ class LidarSpec(_Frozen):
     angle_range: Annotated[float, Field(gt=0.0, le=2.0 * math.pi + 1e-9)] = 2.0 * math.pi
     offset: tuple[Annotated[float, Field(ge=-MAX_LENGTH, le=MAX_LENGTH)], Annotated[float, Field(ge=-MAX_LENGTH, le=MAX_LENGTH)], Angle] = (0.0, 0.0, 0.0)
     noise_std: NonNegativeLength = 0.0
+    repeat_end_beam: bool = False
 
     @model_validator(mode="after")
     def _range_ordered(self) -> "LidarSpec":
@@ -185,11 +191,25 @@ class LidarSpec(_Frozen):
             raise ValueError(f"range_min {self.range_min} must be below range_max {self.range_max}")
         return self
 
+    @property
+    def full_circle(self) -> bool:
+        """Whether the beams cover every direction (and are spaced evenly all round)."""
+        return self.angle_range >= 2.0 * math.pi - 1e-9 and not self.repeat_end_beam
+
+    @property
+    def beam_spacing(self) -> float:
+        """Radians between neighbouring beams."""
+        if self.full_circle:
+            return 2.0 * math.pi / self.beams
+        return self.angle_range / max(self.beams - 1, 1)
+
     def beam_angles(self) -> np.ndarray:
-        """Beam directions relative to the sensor heading, in scan order (IR-SIM's convention:
-        both ends of the range included; a single beam looks straight ahead)."""
+        """Beam directions relative to the sensor heading, in scan order (a single beam looks
+        straight ahead)."""
         if self.beams == 1:
             return np.zeros(1)
+        if self.full_circle:
+            return -math.pi + (np.arange(self.beams) + 0.5) * (2.0 * math.pi / self.beams)
         return np.linspace(-0.5 * self.angle_range, 0.5 * self.angle_range, self.beams)
 
 

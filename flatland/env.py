@@ -29,10 +29,12 @@ class NavEnv(NavigationEnv):
     index tables are in :mod:`common.observations`.
 
     ## Rewards
-    A weighted sum of named terms (:mod:`common.rewards`); ``reward="tutorial2d"`` (default) is the
-    tutorial's progress reward: 10 x metres gained, -5 x (|w| - 0.8) above 0.8 rad/s, -5 within
-    0.3 m and -1 within 0.5 m of an obstacle, +100 at the goal. ``info["reward_terms"]`` holds each
-    term's share of the step's reward.
+    A weighted sum of named terms (:mod:`common.rewards`). ``reward="default"``: 10 x metres gained
+    (signed: a loop nets nothing), +100 at the goal, -100 on a collision, -0.05 per step, -5 x
+    (0.5 - d) within 0.5 m of an obstacle. ``"tutorial2d"`` is the tutorial's reward v2 (10 x metres
+    gained, gains only, -5 x (|w| - 0.8) above 0.8 rad/s, -5 within 0.3 m and -1 within 0.5 m of an
+    obstacle, +100 at the goal), which a robot driving in circles games. ``info["reward_terms"]``
+    holds each term's share of the step's reward.
 
     ## Starting State
     The scenario's start pose, at rest. With a generator kind as ``world``, each reset draws a new
@@ -44,7 +46,7 @@ class NavEnv(NavigationEnv):
     Truncated after ``max_steps`` steps (default 500).
 
     ## Arguments
-    ``gymnasium.make("flatland/Nav-v0", world="sparse", observation="nav7", reward="tutorial2d",
+    ``gymnasium.make("flatland/Nav-v0", world="sparse", observation="nav7", reward="default",
     render_mode=None, max_steps=500, difficulty=0.5, goal_distance_scale=10.0, template=None,
     action_mapping="linear", resample=False,
     goal_threshold=None)``

@@ -3,8 +3,11 @@
 The robot moves by the unicycle update (IR-SIM's Euler step by default), not by forces: the 2D
 tier is a kinematic simulator, and pymunk supplies the collision geometry (circles, convex boxes
 and polygons, segments). Collisions follow IR-SIM's ``stop`` mode: the robot halts at a pose that
-touches something and stays there, velocity zero, until reset. Every move is also swept, so no
-obstacle can be jumped over or grazed unseen at any speed.
+touches something and stays there, velocity zero, until reset. Every move is also swept along the
+integrator's own path, and the earliest contact on it wins, so no obstacle is jumped over at any
+speed or turn rate: a circular footprint is swept exactly; a box is checked at poses no corner of
+which is more than :data:`SWEEP_STEP` from the last one checked, so a graze shallower than that
+may go unseen.
 """
 
 from __future__ import annotations
@@ -22,7 +25,14 @@ from flatland.lidar import Lidar
 
 GRAVITY = 9.81
 _ROBOT_CATEGORY = 0b10
-_BOX_SEARCH_STEP = 0.01  # m: path resolution when a box footprint's swept bound touches something
+SWEEP_STEP = 0.01  # m: the most any point of a box footprint moves between two checked poses
+_ARC_STEP = 0.1  # rad: a circle's arc is swept as chords of this turn (sagitta under 0.13 % of the radius)
+
+
+def _between(a: Pose2D, b: Pose2D, fraction: float) -> Pose2D:
+    """The pose a ``fraction`` of the way from ``a`` to ``b`` (straight, the shorter turn)."""
+    return Pose2D(a[0] + fraction * (b[0] - a[0]), a[1] + fraction * (b[1] - a[1]),
+                  wrap_angle(a[2] + fraction * wrap_angle(b[2] - a[2])))
 
 
 def _edges(points: np.ndarray, closed: bool) -> np.ndarray:
@@ -111,10 +121,13 @@ class World:
 
     def overlaps(self, pose: Pose2D) -> bool:
         """Whether the robot's footprint at ``pose`` touches any obstacle or wall."""
+        return bool(self._touching(pose))
+
+    def _touching(self, pose: Pose2D) -> set[pymunk.Shape]:
         self.body.position = (pose[0], pose[1])
         self.body.angle = pose[2]
         self.space.reindex_shapes_for_body(self.body)
-        return bool(self.space.shape_query(self.footprint))
+        return {info.shape for info in self.space.shape_query(self.footprint)}
 
     def reset(self, seed: int | None = None) -> Readings:
         """Put the robot at the start, at rest; reseed the noise if ``seed`` is given."""
@@ -136,7 +149,7 @@ class World:
             v = w = 0.0
         else:
             v, w = self._clip(float(v), float(w))
-            self.pose, self.stopped = self._sweep(self.pose, self._integrate(self.pose, v, w, self._dt))
+            self.pose, self.stopped = self._move(self.pose, v, w)
         previous_v = self.velocity[0]
         self.velocity = (v, w)
         self.steps += 1
@@ -153,42 +166,57 @@ class World:
             w_lo, w_hi = max(w_lo, self.velocity[1] - self._accel[1]), min(w_hi, self.velocity[1] + self._accel[1])
         return min(max(v, v_lo), v_hi), min(max(w, w_lo), w_hi)
 
-    def _sweep(self, start: Pose2D, end: Pose2D) -> tuple[Pose2D, bool]:
-        """Where the robot ends a move from ``start`` to ``end``, and whether it collided.
+    def _move(self, start: Pose2D, v: float, w: float) -> tuple[Pose2D, bool]:
+        """Where the robot ends a step of (v, w) from ``start``, and whether it collided.
 
-        As in IR-SIM's stop mode, a move whose end pose overlaps something halts there. A contact
-        that end-pose check would miss (a thin or small obstacle passed between the two poses)
-        halts the robot at its first touching pose instead: the swept footprint is checked too.
+        The move is swept along the integrator's path and the earliest contact decides. If the end
+        pose still touches what was touched first, the robot halts at the end pose, as IR-SIM's
+        stop mode does (so poses match IR-SIM's). If the first thing touched is behind the end pose
+        (a thin wall jumped in one step, a wall a spinning box's corner swung through), it halts
+        where it first touched it: IR-SIM, which checks end poses only, would let it through.
         """
-        # The box around the swept bounding circle holds both poses: nothing in it, nothing touched.
+        end = self._integrate(start, v, w, self._dt)
+        # Nothing within the move's reach (path length |v|·dt plus the footprint): nothing touched.
         # (Space.segment_query with a radius is no substitute: chipmunk walks its tree with the bare
         # segment and misses shapes that only the radius reaches.)
-        r = self._sweep_radius
-        box = pymunk.BB(min(start[0], end[0]) - r, min(start[1], end[1]) - r,
-                        max(start[0], end[0]) + r, max(start[1], end[1]) + r)
+        reach = abs(v) * self._dt + self._sweep_radius
+        box = pymunk.BB(start[0] - reach, start[1] - reach, start[0] + reach, start[1] + reach)
         candidates = self.space.bb_query(box, self._not_robot)
         if not candidates:
             return end, False
-        if self.overlaps(end):
-            return end, True
-        turn = wrap_angle(end[2] - start[2])
-        along = lambda f: Pose2D(start[0] + f * (end[0] - start[0]), start[1] + f * (end[1] - start[1]),
-                                 wrap_angle(start[2] + f * turn))
-        if self.scenario.robot.shape == "circle":
-            # The swept circle is the footprint: the earliest alpha is the first contact. A contact at
-            # alpha 0 is an overlap the robot started in and is leaving (the end pose is clear).
-            hits = [hit.alpha for hit in (shape.segment_query(start[:2], end[:2], r) for shape in candidates)
-                    if hit and hit.alpha > 0.0]
-            return (along(min(hits)), True) if hits else (end, False)
         if self.overlaps(start):
-            return end, False  # leaving an overlap: judge by the end pose alone, as IR-SIM does
-        # The swept bounding circle only says a box footprint may touch: search the path finely.
-        substeps = max(1, math.ceil(math.hypot(end[0] - start[0], end[1] - start[1]) / _BOX_SEARCH_STEP))
-        for k in range(1, substeps):
-            pose = along(k / substeps)
-            if self.overlaps(pose):
-                return pose, True
-        return end, False
+            return end, self.overlaps(end)  # leaving an overlap: judge by the end pose alone, as IR-SIM does
+        first = self._first_contact(start, v, w, end, candidates)
+        if first is None:
+            return end, False
+        pose, touched = first
+        return (end if touched & self._touching(end) else pose), True
+
+    def _first_contact(self, start: Pose2D, v: float, w: float, end: Pose2D,
+                       candidates: list[pymunk.Shape]) -> tuple[Pose2D, set[pymunk.Shape]] | None:
+        """The earliest touching pose on the way from ``start`` to ``end``, and what it touches."""
+        turn = abs(w) * self._dt
+        circle = self.scenario.robot.shape == "circle"
+        if circle:
+            # The swept circle is the footprint: exact along a straight move, chords along an arc.
+            curved = turn > 0 and self._integrate is not INTEGRATORS["euler"]
+            count = max(1, math.ceil(turn / _ARC_STEP)) if curved else 1
+        else:
+            # A box's corners travel the translation plus their arc about the centre.
+            count = max(1, math.ceil((abs(v) * self._dt + turn * self._sweep_radius) / SWEEP_STEP))
+        previous = start
+        for k in range(1, count + 1):
+            pose = end if k == count else self._integrate(start, v, w, self._dt * k / count)
+            if circle:
+                hits = [(hit.alpha, shape) for shape in candidates
+                        if (hit := shape.segment_query(previous[:2], pose[:2], self._sweep_radius))]
+                if hits:
+                    alpha, shape = min(hits, key=lambda hit: hit[0])
+                    return _between(previous, pose, alpha), {shape}
+            elif touched := self._touching(pose):
+                return pose, touched
+            previous = pose
+        return None
 
     def _read(self, acceleration: float) -> Readings:
         x, y, yaw = self.pose

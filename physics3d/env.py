@@ -55,10 +55,12 @@ class WarehouseNavEnv(NavigationEnv):
     ``Box(0, 20, (240, 320, 1), float32)`` in metres, from the camera above and behind the body.
 
     ## Rewards
-    A weighted sum of named terms (:mod:`common.rewards`); ``reward="tutorial3d"`` (default) is the
-    3D tutorial's final reward: progress (metres gained), +0.1 x heading alignment beyond 1 m,
-    +50 at the goal, -10 on a collision, -0.01 per step, -0.1 when stuck, -1 x (0.3 - d) within
-    0.3 m of an obstacle. ``info["reward_terms"]`` holds each term's share of the step's reward.
+    A weighted sum of named terms (:mod:`common.rewards`). ``reward="default"``: 10 x metres gained
+    (signed: a loop nets nothing), +100 at the goal, -100 on a collision, -0.05 per step, -5 x
+    (0.5 - d) within 0.5 m of an obstacle. ``"tutorial3d"`` is the 3D tutorial's final reward
+    (progress, heading alignment beyond 1 m, +50 at the goal, -10 on a collision, -0.01 per step,
+    -0.1 when stuck, -1 x (0.3 - d) within 0.3 m). ``info["reward_terms"]`` holds each term's share
+    of the step's reward.
 
     ## Starting State
     The scenario's start pose, at rest on the floor. With a generator kind as ``world``, each
@@ -72,7 +74,7 @@ class WarehouseNavEnv(NavigationEnv):
 
     ## Arguments
     ``gymnasium.make("physics3d/WarehouseNav-v0", world="warehouse", observation="lidar43",
-    reward="tutorial3d", render_mode=None, max_steps=500, difficulty=0.5, goal_distance_scale=10.0,
+    reward="default", render_mode=None, max_steps=500, difficulty=0.5, goal_distance_scale=10.0,
     template=None, action_mapping="linear", camera=False, control_period=None, resample=False,
     goal_threshold=None)``
 
@@ -98,7 +100,7 @@ class WarehouseNavEnv(NavigationEnv):
     >>> observation, reward, terminated, truncated, info = env.step(env.action_space.sample())
     """
 
-    def __init__(self, world: Any = "warehouse", observation: str = "lidar43", reward: Any = "tutorial3d",
+    def __init__(self, world: Any = "warehouse", observation: str = "lidar43", reward: Any = "default",
                  template: Scenario | None = None, camera: bool = False, control_period: float | None = None,
                  **kwargs: Any) -> None:
         self.camera = camera

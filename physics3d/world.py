@@ -110,17 +110,21 @@ class World:
         self._angles = self.robot.wheel_angles()
         self.odometry.reset(self.pose())
         self.imu.reset()
-        self.readings = self._read(0.0)
+        self.readings = self._read(0.0, bool(self.touching()))
         return self.readings
 
     def step(self, v: float, w: float) -> Readings:
         """Drive with (v m/s, w rad/s), clipped to the robot's limits, for one control period."""
         v_lo, v_hi, w_lo, w_hi = self._limits
         self.robot.drive(min(max(float(v), v_lo), v_hi), min(max(float(w), w_lo), w_hi))
+        # A contact at any sub-step counts: a graze that separates again within the control period
+        # is a collision too, not only one still touching at its end.
+        collided = False
         for _ in range(self.substeps):
             p.stepSimulation(physicsClientId=self.client)
+            collided = collided or bool(self.touching())
         self.steps += 1
-        self.readings = self._read(self.period)
+        self.readings = self._read(self.period, collided)
         return self.readings
 
     def pose(self) -> Pose2D:
@@ -136,7 +140,7 @@ class World:
         others.discard(floor)
         return sorted(others)
 
-    def _read(self, dt: float) -> Readings:
+    def _read(self, dt: float, collided: bool) -> Readings:
         position, orientation = self.robot.link_pose()
         yaw = yaw_of(orientation)
         linear, angular = self.robot.velocity()
@@ -154,7 +158,7 @@ class World:
             odometry=Odometry(odometry.pose, odometry.v, odometry.w),
             lidar=frozen(self.lidar.scan(position[0], position[1], position[2], yaw)),
             imu=self.imu.read(orientation, linear, angular, dt),
-            collided=bool(self.touching()),
+            collided=collided,
             time=self.steps * self.period,
             camera=camera,
         )

@@ -124,6 +124,7 @@ def test_render_writes_a_gif_and_the_drift_plot(tmp_path, capsys):
     (["render", "--episodes", "3"], "unrecognized arguments: --episodes 3"),
     (["compare", "--controllers", ",,,"], "--controllers: no controller named in ',,,'"),
     (["compare", "--max-steps", "0"], "argument --max-steps: must be from 1"),
+    (["eval", "--policy", "p.zip", "--goal-threshold", "-0.1"], "argument --goal-threshold: must be more than 0"),
 ])
 def test_every_bad_argument_names_its_flag(argv, expected, capsys):
     try:
@@ -176,3 +177,7 @@ def test_controllers_and_policies_arrive_on_an_irsim_world_with_its_default_goal
                  "--json"]) == 0
     results = json.loads(capsys.readouterr().out)
     assert {name: figures["success_rate"] for name, figures in results.items()} == dict.fromkeys(results, 1.0)
+    # The same radius asked of a suite's scenarios.
+    assert main(["compare", "--suite", "sparse", "--episodes", "3", "--goal-threshold", "0.1", "--controllers", "pid_blend",
+                 "--out", str(tmp_path / "s"), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["pid_blend"]["success_rate"] == 1.0

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
+from common.kinematics import Pose2D, wrap_angle
 from common.readings import Readings
 from common.scenario import (
     BoxObstacle,
@@ -136,6 +137,74 @@ def test_one_long_step_cannot_tunnel(obstacle, near_face):
     assert hit.pose.x == pytest.approx(near_face - RADIUS, abs=1e-6)
     assert hit.pose.y == 5.0
     assert world.step(50.0, 0.0).pose == hit.pose
+
+
+FAST = RobotProfile(v_max=80.0, w_max=100.0)
+FAST_BOX = RobotProfile(shape="box", length=0.6, width=0.2, v_max=80.0, w_max=100.0)
+
+
+@pytest.mark.parametrize("robot", [FAST, FAST_BOX], ids=["circle", "box"])
+def test_a_thin_wall_before_an_obstacle_stops_the_robot_at_the_wall(robot):
+    """One 6 m step whose end pose overlaps a far box: the thin wall on the way is what it hits."""
+    wall = SegmentObstacle(points=[(3.0, 0.0), (3.0, 10.0)])
+    far = BoxObstacle(x=8.0, y=5.0, length=1.0, width=3.0)
+    world = make_world([wall, far], start=(1.5, 5.0, 0.0), robot=robot)
+    hit = world.step(60.0, 0.0)
+    half = robot.radius if robot.shape == "circle" else robot.length / 2
+    assert hit.collided and hit.pose.x <= 3.0 - half + 1e-6 and hit.pose.x > 3.0 - half - 0.02
+
+
+@pytest.mark.parametrize("integrator", ["euler", "exact"])
+@pytest.mark.parametrize("angle", np.radians(np.arange(0, 180, 15)))
+@pytest.mark.parametrize("robot", [FAST, FAST_BOX], ids=["circle", "box"])
+def test_a_thin_wall_at_any_angle_is_never_crossed(robot, angle, integrator):
+    """A zero-thickness wall through (5, 5) at ``angle``; the robot drives at it from 2 m away at up
+    to 40 m/s while turning: whatever the step, it never ends on the wall's far side."""
+    direction = np.array([math.cos(angle), math.sin(angle)])
+    wall = SegmentObstacle(points=[tuple(np.array([5.0, 5.0]) - 4 * direction), tuple(np.array([5.0, 5.0]) + 4 * direction)])
+    normal = np.array([-direction[1], direction[0]])
+    start = np.array([5.0, 5.0]) - 2.0 * normal
+    heading = math.atan2(normal[1], normal[0])
+    for v, w in [(40.0, 0.0), (25.0, 3.0), (10.0, -20.0)]:
+        scenario = Scenario(world=WorldSpec(width=20, height=20, walls=False, step_time=DT, integrator=integrator),
+                            robot=robot, lidar=LidarSpec(beams=8), start=(*start, heading), obstacles=[wall])
+        world = World(scenario, seed=0)
+        world.reset()
+        for _ in range(5):
+            readings = world.step(v, w)
+            side = float(np.dot(np.array(readings.pose[:2]) - np.array([5.0, 5.0]), normal))
+            assert side < 0, (v, w, readings.pose)  # the centre never crosses the line
+            if readings.collided:
+                break
+        assert readings.collided or w != 0, (v, w)  # a tight turn may circle away from the wall
+
+
+def test_an_arc_is_swept_along_the_arc_not_its_chord():
+    """With the exact integrator, v 10 m/s and w 20 rad/s turn 2 rad on a 0.5 m radius: the arc bulges
+    to x = 5.5 (the footprint to 5.7) while the chord and end pose stay below x = 5.65."""
+    wall = SegmentObstacle(points=[(5.68, 3.0), (5.68, 7.0)])
+    scenario = Scenario(world=WorldSpec(width=20, height=20, walls=False, step_time=DT, integrator="exact"),
+                        robot=FAST, lidar=LidarSpec(beams=8), start=(5.0, 5.0, 0.0), obstacles=[wall])
+    world = World(scenario, seed=0)
+    world.reset()
+    assert not world.overlaps(Pose2D(5.0 + 0.5 * math.sin(2.0), 5.5 - 0.5 * math.cos(2.0), 2.0))  # the end pose
+    readings = world.step(10.0, 20.0)
+    assert readings.collided and readings.pose.x < 5.5
+
+
+@pytest.mark.parametrize("w", [-100.0, -30.0, 30.0, 100.0])
+def test_a_box_spinning_on_the_spot_next_to_a_wall_hits_it(w):
+    """The box (0.6 × 0.2 m, across the wall) reaches 0.32 m from its centre with a corner; the wall
+    is 0.25 m away. In one step at 30 rad/s it turns 3 rad to a pose clear of the wall again: only
+    the corner's swing on the way touches it."""
+    wall = SegmentObstacle(points=[(5.25, 3.0), (5.25, 7.0)])
+    world = make_world([wall], start=(5.0, 5.0, math.pi / 2), robot=FAST_BOX)
+    assert not world.overlaps(world.scenario.start_pose)
+    assert not world.overlaps(Pose2D(5.0, 5.0, math.pi / 2 + w * DT))  # the end pose alone says "clear"
+    readings = world.step(0.0, w)
+    assert readings.collided
+    # Halted where a corner first reached the wall: a fraction of the turn from the start.
+    assert abs(wrap_angle(readings.pose.yaw - math.pi / 2)) < 0.7
 
 
 # --- box footprint ----------------------------------------------------------------------------

@@ -42,6 +42,9 @@ def _with(change: dict, stage: dict | None = None) -> dict:
     (_with({}, {"budget": -5}), "stages.0.budget", "greater than or equal to 1"),
     (_with({}, {"hyperparams": {"learning_rte": 0.1}}), "stages.0.hyperparams.learning_rte", "not a PPO argument; allowed:"),
     (_with({}, {"reward": {"speed": 1}}), "stages.0.reward.speed", "unknown reward term"),
+    (_with({}, {"reward": {"proximity": {"weight": -1, "threshold": "fast"}}}), "stages.0.reward.proximity.threshold",
+     "got 'fast'; allowed: a finite number (default 0.3)"),
+    (_with({}, {"reward": {"stuck": {"weight": -1, "window": 2.5}}}), "stages.0.reward.stuck.window", "allowed: an integer"),
     (_with({}, {"scenarios": {"kind": "sparse", "suite": "sparse"}}), "stages.0.scenarios", "exactly one of kind, mix, suite or file"),
     (_with({}, {"eval": {"suite": "mars"}}), "stages.0.eval.suite", "unknown suite"),
     (_with({}, {"init_from": "previous"}), "stages.0.init_from", "the first stage has no previous stage"),
@@ -72,8 +75,64 @@ def _run(out: Path, *extra: str) -> subprocess.Popen:
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
 
+class _Stop(Exception):
+    """Raised in place of training, to look at a resumed model before it learns anything."""
+
+
+def _resumed_model(run_dir: Path, monkeypatch):
+    """The model a --resume of ``run_dir`` would start training, as it is handed to SB3's learn."""
+    from stable_baselines3 import PPO
+
+    from common.curriculum.runner import Runner
+
+    captured = {}
+
+    def learn(self, *args, **kwargs):
+        captured["model"] = self
+        raise _Stop
+
+    monkeypatch.setattr(PPO, "learn", learn)
+    with pytest.raises(_Stop):
+        Runner(load_curriculum(TINY), run_dir, resume=True, progress=False).run()
+    monkeypatch.undo()
+    return captured["model"]
+
+
+def _assert_resumed_exactly(model, checkpoint: Path, stage_seed_scenarios: list[str]) -> None:
+    """The model, its optimiser, its step count and its normaliser are the checkpoint's, and its
+    envs go on from the checkpoint's generators instead of starting the stage's sequence again."""
+    import torch
+
+    from common.curriculum.policy_file import PolicyFile
+
+    file = PolicyFile(checkpoint)
+    weights = file.tensors("policy.pth")
+    assert weights.keys() == model.policy.state_dict().keys()
+    assert all(torch.equal(model.policy.state_dict()[key], value) for key, value in weights.items())
+    saved, live = file.tensors("policy.optimizer.pth")["state"], model.policy.optimizer.state_dict()["state"]
+    assert saved.keys() == live.keys() and all(torch.equal(saved[k]["exp_avg"], live[k]["exp_avg"]) for k in saved)
+    assert model.num_timesteps == file.manifest.timesteps > 0
+    venv = model.get_env()
+    normalizer = file.normalizer(venv.observation_space.shape[0])
+    assert np.array_equal(venv.obs_rms.mean, normalizer.mean) and np.array_equal(venv.obs_rms.var, normalizer.var)
+    assert venv.obs_rms.count == normalizer.count > 1000
+    venv.reset()
+    assert [s.name for s in venv.get_attr("scenario")] != stage_seed_scenarios
+
+
+def _first_scenarios(stage_seed: int) -> list[str]:
+    """The scenarios a fresh start of TINY's first stage gives its four envs."""
+    from stable_baselines3.common.env_util import make_vec_env
+
+    import flatland  # noqa: F401
+
+    venv = make_vec_env("flatland/Nav-v0", n_envs=4, seed=stage_seed, env_kwargs={"world": "open", "difficulty": 0.2})
+    venv.reset()
+    return [s.name for s in venv.get_attr("scenario")]
+
+
 @pytest.mark.slow
-def test_run_writes_every_artefact_and_resumes_after_kill(tmp_path):
+def test_run_writes_every_artefact_and_resumes_after_kill(tmp_path, monkeypatch):
     whole = tmp_path / "whole"
     # With the progress bar (SB3 needs tqdm and rich for it) and TensorBoard logging, as a user runs it.
     finished = _run(whole)
@@ -91,6 +150,16 @@ def test_run_writes_every_artefact_and_resumes_after_kill(tmp_path):
     manifest = read_manifest(whole / "stages/0-open/policy.zip")
     assert manifest["curriculum"] == "tiny" and manifest["observation"] == "nav7" and manifest["timesteps"] > 0
     assert manifest["final_eval"]["draw"] == "test" and manifest["final_eval"]["episodes"] == 6
+    from common.curriculum.policy_file import PolicyFile
+    from common.generators import get_suite
+
+    # The final test draw is the suite's scenarios from seed 100,000: none of the validation draw's.
+    tested = {r["scenario"] for r in csv.DictReader((whole / "stages/0-open/final_episodes.csv").open())}
+    assert tested == {s.name for s in get_suite("open").scenarios(count=6, seed=100_000)}
+    assert not tested & {s.name for s in get_suite("open").scenarios(count=4, seed=0)}
+    # The second stage started from the first one's normaliser: its count goes on from there.
+    first, second = PolicyFile(whole / "stages/0-open/policy.zip"), PolicyFile(whole / "stages/1-sparse/policy.zip")
+    assert second.normalizer(7).count >= first.normalizer(7).count + second.manifest.timesteps
 
     killed = tmp_path / "killed"
     process = _run(killed, "--no-progress")
@@ -107,6 +176,7 @@ def test_run_writes_every_artefact_and_resumes_after_kill(tmp_path):
     # As if commits landed between the kill and the resume: the policies keep the run's start commit.
     provenance = json.loads((killed / "run.json").read_text())
     (killed / "run.json").write_text(json.dumps({**provenance, "git_commit": "commit-at-start"}))
+    _assert_resumed_exactly(_resumed_model(killed, monkeypatch), last, _first_scenarios(stage_seed=0))
     resumed = _run(killed, "--resume", "--no-progress")
     assert resumed.wait(timeout=300) == 0, resumed.stdout.read()
     assert _shape(killed) == _shape(whole)
@@ -208,3 +278,45 @@ def test_zoo_style_schedules_and_action_noise():
     out = resolve_hyperparams({"learning_rate": "lin_1e-3", "action_noise": {"type": "normal", "sigma": 0.2}, "gamma": 0.98})
     assert out["learning_rate"](1.0) == pytest.approx(1e-3) and out["learning_rate"](0.25) == pytest.approx(2.5e-4)
     assert isinstance(out["action_noise"], NormalActionNoise) and out["gamma"] == 0.98
+
+
+def test_policy_zip_is_the_checkpoint_of_the_best_validation(tmp_path, monkeypatch):
+    import gymnasium as gym
+    import torch
+    from stable_baselines3 import PPO
+
+    import flatland  # noqa: F401
+    from common.curriculum.policy_file import PolicyFile
+    from common.curriculum.runner import Runner
+    from common.curriculum.training import CurriculumCallback
+    from common.evaluation import Episode, summarise
+
+    config = load_curriculum(TINY)
+    runner = Runner(config, tmp_path / "run", progress=False)
+    runner.prepare()
+    rates = iter([0.25, 0.75, 0.5])
+
+    def scripted_evaluation(model, stage, normalizer, episodes, seed_shift):
+        wins = int(next(rates) * 4)
+        return summarise("policy", [Episode("policy", "s", i, "success" if i < wins else "timeout", 10, 1.0, 1.0,
+                                            float(i < wins), 0.0) for i in range(4)])
+
+    monkeypatch.setattr(runner, "evaluate_model", scripted_evaluation)
+    model = PPO("MlpPolicy", gym.make("flatland/Nav-v0", world="open"), n_steps=64, batch_size=64, device="cpu")
+    stage = config.stages[0]
+    paths = runner.stage_paths(0, stage)
+    callback = CurriculumCallback(runner, 0, stage, paths)
+    weights = []
+    for step in (1024, 2048, 3072):
+        model.num_timesteps = step
+        with torch.no_grad():
+            for parameter in model.policy.parameters():
+                parameter.add_(1.0)  # each checkpoint's weights differ
+        weights.append({key: value.clone() for key, value in model.policy.state_dict().items()})
+        callback._evaluate_and_checkpoint(model)
+    callback.finish(model)
+    runner.release()
+    policy = PolicyFile(paths.policy)
+    assert policy.manifest.timesteps == 2048 and policy.raw_manifest["eval"]["success_rate"] == 0.75
+    assert all(torch.equal(policy.tensors("policy.pth")[key], value) for key, value in weights[1].items())
+    assert PolicyFile(paths.last).manifest.timesteps == 3072

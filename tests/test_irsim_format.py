@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from tests.conftest import optional
 import yaml
 
 from common.errors import ConfigError
@@ -164,7 +166,7 @@ def test_single_beam_points_straight_ahead(tmp_path):
 
 
 def test_circle_obstacle_is_irsims_64_gon(tmp_path):
-    shapely = pytest.importorskip("shapely")
+    shapely = optional("shapely")
     (obstacle,) = load(tmp_path, ROBOT + """\
 obstacle:
   - shape: {name: circle, radius: 0.5, center: [0.2, 0.1]}
@@ -208,7 +210,7 @@ obstacle:
 
 
 def test_self_intersecting_polygon_becomes_its_envelope(tmp_path):
-    shapely = pytest.importorskip("shapely")
+    shapely = optional("shapely")
     vertices = [[0, 0], [2, 2], [2, 0], [0, 2]]  # a bow tie
     (obstacle,) = load(tmp_path, ROBOT + f"obstacle: {{shape: {{name: polygon, vertices: {vertices}}}, state: [0, 0, 0]}}\n").obstacles
     envelope = shapely.envelope(shapely.make_valid(shapely.geometry.Polygon(vertices)))
@@ -224,7 +226,7 @@ def test_self_intersecting_polygon_becomes_its_envelope(tmp_path):
     [[0, 0], [1, 1], [2, 2]],
 ])
 def test_simple_polygon_check_agrees_with_shapely(vertices):
-    shapely = pytest.importorskip("shapely")
+    shapely = optional("shapely")
     assert is_simple_polygon(np.asarray(vertices, float)) == shapely.geometry.Polygon(vertices).is_valid
 
 
@@ -454,7 +456,12 @@ def test_round_trip_through_irsim_export():
     )
     back = parse_irsim(yaml.safe_load(yaml.safe_dump(scenario_to_irsim(scenario))), "exported.yaml")
     assert (back.robot, back.lidar, back.start, back.goal, back.goal_threshold) == (
-        scenario.robot.model_copy(update={"w_min": -2.0}), scenario.lidar, scenario.start, scenario.goal, 0.25)
+        scenario.robot.model_copy(update={"w_min": -2.0}), scenario.lidar.model_copy(update={"repeat_end_beam": True}),
+        scenario.start, scenario.goal, 0.25)
+    # A full circle of evenly spaced beams leaves as IR-SIM's layout of the same directions.
+    full = Scenario(lidar=LidarSpec(beams=36))
+    exported = parse_irsim(yaml.safe_load(yaml.safe_dump(scenario_to_irsim(full))), "exported.yaml").lidar
+    np.testing.assert_allclose(exported.beam_angles(), full.lidar.beam_angles(), atol=1e-12)
     assert back.world.walls is False and len(back.obstacles) == 5  # the walls come back as a linestring
     circle, box, polygon, segment, walls = back.obstacles
     np.testing.assert_allclose(np.hypot(*(np.asarray(circle.vertices) - [5, 5]).T), 0.4)

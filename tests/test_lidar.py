@@ -91,8 +91,8 @@ def test_box_obstacle_through_the_world_matches():
 
 
 def test_boundary_walls_in_an_empty_world():
-    # Beams at -pi, -pi/2, 0, pi/2, pi from (2, 3) facing +x in the 10 x 10 world.
-    world = make_world(walls=True, start=(2.0, 3.0, 0.0), beams=5)
+    # Beams at -pi, -pi/2, 0, pi/2, pi (IR-SIM's layout) from (2, 3) facing +x in the 10 x 10 world.
+    world = make_world(walls=True, start=(2.0, 3.0, 0.0), beams=5, repeat_end_beam=True)
     assert_allclose(scan(world), (2.0, 3.0, 8.0, 7.0, 2.0), atol=1e-12)
 
 
@@ -102,7 +102,7 @@ def test_no_walls_means_misses():
 
 
 def test_walls_beyond_range_read_range_max():
-    world = make_world(walls=True, start=(2.0, 3.0, 0.0), beams=5, range_max=5.0)
+    world = make_world(walls=True, start=(2.0, 3.0, 0.0), beams=5, range_max=5.0, repeat_end_beam=True)
     assert_allclose(scan(world), (2.0, 3.0, 5.0, 5.0, 2.0), atol=1e-12)
 
 
@@ -142,10 +142,15 @@ def test_mounting_offset_shifts_and_rotates_the_sensor():
     assert unturned.scan(2.0, 3.0, math.pi / 2)[1] == RANGE_MAX
 
 
-@pytest.mark.parametrize("angle_range, beams", [(math.pi / 2, 7), (math.radians(270.0), 28), (2.0 * math.pi, 36)])
-def test_beam_angles_follow_linspace_around_the_heading(angle_range, beams):
-    spec = LidarSpec(beams=beams, angle_range=angle_range, range_max=1000.0, offset=(0.0, 0.0, 0.2))
-    expected_relative = np.linspace(-angle_range / 2, angle_range / 2, beams)
+@pytest.mark.parametrize("angle_range, beams, repeat", [(math.pi / 2, 7, False), (math.radians(270.0), 28, False),
+                                                         (2.0 * math.pi, 36, True), (2.0 * math.pi, 36, False)])
+def test_beam_angles_follow_linspace_around_the_heading(angle_range, beams, repeat):
+    spec = LidarSpec(beams=beams, angle_range=angle_range, range_max=1000.0, offset=(0.0, 0.0, 0.2),
+                     repeat_end_beam=repeat)
+    if angle_range < 2.0 * math.pi or repeat:
+        expected_relative = np.linspace(-angle_range / 2, angle_range / 2, beams)
+    else:  # a full circle: evenly spaced, centred on the heading
+        expected_relative = np.linspace(-math.pi, math.pi, beams, endpoint=False) + math.pi / beams
     assert_allclose(spec.beam_angles(), expected_relative, atol=0)
     # A long wall x = 10 seen from the origin with heading 0.1 (robot) + 0.2 (mount): the range of the
     # beam at world angle a is 10 / cos(a); the layout is not symmetric about the wall's normal, so a
@@ -177,24 +182,24 @@ def test_range_min_clips_near_returns():
 
 @pytest.mark.parametrize("offset", [0.0, 0.5, -1.2])
 def test_sensor_inside_a_circle_reads_the_exit_distance(offset):
-    lidar = make_lidar(LidarSpec(beams=5, range_max=RANGE_MAX), circles=[(3.0, 3.0, 2.0)])
+    lidar = make_lidar(LidarSpec(beams=5, range_max=RANGE_MAX, repeat_end_beam=True), circles=[(3.0, 3.0, 2.0)])
     ranges = lidar.scan(3.0 + offset, 3.0, 0.0)  # beams at -pi, -pi/2, 0, pi/2, pi
     side = math.sqrt(4.0 - offset**2)
     assert_allclose(ranges, (2.0 + offset, side, 2.0 - offset, side, 2.0 + offset), atol=1e-12)
 
 
 def test_sensor_inside_a_box_reads_the_exit_distance():
-    lidar = make_lidar(LidarSpec(beams=5, range_max=RANGE_MAX), boxes=[box_row(3.0, 3.0, 4.0, 2.0)])
+    lidar = make_lidar(LidarSpec(beams=5, range_max=RANGE_MAX, repeat_end_beam=True), boxes=[box_row(3.0, 3.0, 4.0, 2.0)])
     assert_allclose(lidar.scan(3.5, 3.0, 0.0), (2.5, 1.0, 1.5, 1.0, 2.5), atol=1e-12)
 
 
 def test_unobstructed_obstacles_are_invisible():
     hidden = [CircleObstacle(x=5.0, y=3.0, radius=0.5, unobstructed=True),
               BoxObstacle(x=2.0, y=6.0, length=1.0, width=1.0, unobstructed=True)]
-    world = make_world(hidden, walls=True, start=(2.0, 3.0, 0.0), beams=5)
+    world = make_world(hidden, walls=True, start=(2.0, 3.0, 0.0), beams=5, repeat_end_beam=True)
     assert_allclose(scan(world), (2.0, 3.0, 8.0, 7.0, 2.0), atol=1e-12)
     visible = [obstacle.model_copy(update={"unobstructed": False}) for obstacle in hidden]
-    seen = scan(make_world(visible, walls=True, start=(2.0, 3.0, 0.0), beams=5))
+    seen = scan(make_world(visible, walls=True, start=(2.0, 3.0, 0.0), beams=5, repeat_end_beam=True))
     assert_allclose(seen[2:4], (2.5, 2.5), atol=1e-12)
 
 
@@ -306,3 +311,21 @@ def test_random_scenes_match_a_brute_force_caster(seed):
         angles = yaw + spec.offset[2] + spec.beam_angles()
         expected = reference_scan(ox, oy, angles, circles, boxes, segments, spec.range_max)
         assert_allclose(lidar.scan(x, y, yaw), expected, atol=1e-9)
+
+
+def test_a_full_circle_reads_every_direction_once_and_irsim_files_keep_their_layout():
+    import math
+
+    from common.generators import generate
+
+    angles = LidarSpec(beams=36).beam_angles()
+    np.testing.assert_allclose(np.diff(angles), 2 * math.pi / 36)
+    assert angles[0] == pytest.approx(-math.pi + math.pi / 36) and angles[-1] == pytest.approx(math.pi - math.pi / 36)
+    wrapped = np.round(np.mod(angles, 2 * math.pi), 9)
+    assert len(set(wrapped)) == 36  # no direction read twice
+    assert np.array_equal(generate("sparse", 0).lidar.beam_angles(), angles)  # the templates' lidar
+    # IR-SIM's own layout: both ends of the range, so its 360° scan repeats the ±π beam.
+    irsim = LidarSpec(beams=36, repeat_end_beam=True).beam_angles()
+    np.testing.assert_allclose(irsim, np.linspace(-math.pi, math.pi, 36))
+    # Arcs short of a full circle keep both ends whichever layout.
+    np.testing.assert_allclose(LidarSpec(beams=5, angle_range=math.pi).beam_angles(), np.linspace(-math.pi / 2, math.pi / 2, 5))

@@ -126,3 +126,91 @@ def test_reward_spec_errors_name_the_field_and_the_allowed_values():
 def test_presets_are_valid_specs():
     for name in PRESETS:
         assert resolve_reward_spec(name)
+
+
+def test_a_sector_reads_its_nearest_beam_wherever_it_lies():
+    ranges = np.random.default_rng(0).permutation(np.linspace(0.2, 5.0, 720))
+    np.testing.assert_array_equal(sector_minimum(720, 36)(ranges), ranges.reshape(36, 20).min(axis=1))
+    np.testing.assert_array_equal(sector_minimum(72, 36)(ranges[:72]), ranges[:72].reshape(36, 2).min(axis=1))
+
+
+# -- the env's wiring: what it feeds the reward and the observation -------------------------------
+
+
+def _flat_env(scenario, **kwargs):
+    import gymnasium as gym
+
+    import flatland  # noqa: F401
+
+    return gym.make("flatland/Nav-v0", world=scenario, **kwargs)
+
+
+STAND_STILL = np.array([-1.0, 0.0], dtype=np.float32)  # the linear mapping's v = 0, w = 0
+
+
+def test_the_env_pays_proximity_on_the_nearest_lidar_return():
+    from common.scenario import Scenario, SegmentObstacle
+
+    # A wall 0.4 m ahead: the nearest beams (±5°) read 0.4 / cos 5°, the rest farther.
+    wall = SegmentObstacle(points=[(5.4, 3.0), (5.4, 7.0)])
+    env = _flat_env(Scenario(start=(5.0, 5.0, 0.0), goal=(2.0, 5.0), obstacles=[wall]), observation="nav7")
+    env.reset(seed=0)
+    observation, _, _, _, info = env.step(STAND_STILL)
+    nearest = 0.4 / math.cos(math.pi / 36)
+    assert info["reward_terms"]["proximity"] == pytest.approx(-5.0 * (0.5 - nearest))
+    assert observation[5] == pytest.approx(nearest / 5.0)  # nav7's nearest return
+
+
+def test_the_env_observes_through_odometry_not_the_true_pose():
+    from common.scenario import RobotProfile as Profile, Scenario
+
+    scenario = Scenario(start=(2.0, 2.0, 0.0), goal=(8.0, 8.0), robot=Profile(encoder_noise=0.3))
+    env = _flat_env(scenario, observation="lidar43")
+    env.reset(seed=3)
+    for _ in range(40):
+        observation, *_ = env.step(np.array([0.5, 0.4], dtype=np.float32))
+    readings = env.unwrapped.readings
+    (x, y, yaw), (tx, ty, tyaw) = readings.odometry.pose, readings.pose
+    assert math.dist((x, y), (tx, ty)) > 0.05  # the noise has made them differ
+    heading = math.atan2(8.0 - y, 8.0 - x)
+    assert observation[2] == pytest.approx(math.remainder(heading - yaw, 2 * math.pi) / math.pi, abs=1e-6)
+    assert observation[42] == pytest.approx(math.dist((x, y), (8.0, 8.0)) / 10.0, abs=1e-6)
+    assert observation[3] == pytest.approx(readings.odometry.v / scenario.robot.v_max, abs=1e-6)
+
+
+def _episode_return(reward: str, action: np.ndarray) -> float:
+    from common.scenario import Scenario
+
+    env = _flat_env(Scenario(start=(3.0, 3.0, 0.0), goal=(7.0, 7.0)), reward=reward, max_steps=500)
+    env.reset(seed=0)
+    total = 0.0
+    for _ in range(500):
+        _, reward_, terminated, truncated, _ = env.step(action)
+        total += reward_
+        if terminated or truncated:
+            break
+    return total
+
+
+def test_driving_in_circles_earns_nothing_under_the_default_but_pays_under_tutorial2d():
+    # 1 m/s at 0.8 rad/s (just under tutorial2d's spin penalty): 500 steps round a 1.25 m loop.
+    circle = np.array([1.0, 0.8], dtype=np.float32)
+    assert _episode_return("default", circle) < 0
+    # The tutorial's flaw, kept as a lesson: paid for every approach, charged nothing for leaving;
+    # circling earns more than reaching the goal does (10 x 5.4 m + 100).
+    assert _episode_return("tutorial2d", circle) > 10 * (4 * math.sqrt(2) - 0.3) + 100
+
+
+def test_the_default_reward_pays_for_reaching_the_goal():
+    from common.scenario import Scenario
+
+    env = _flat_env(Scenario(start=(3.0, 3.0, math.pi / 4), goal=(7.0, 7.0)), max_steps=200)
+    env.reset(seed=0)
+    total, shares = 0.0, {}
+    for _ in range(200):
+        _, reward, terminated, _, info = env.step(np.array([1.0, 0.0], dtype=np.float32))
+        total += reward
+        if terminated:
+            break
+    assert info["is_success"] and info["reward_terms"]["goal"] == 100.0
+    assert total > 100 + 10 * (4 * math.sqrt(2) - 0.3) - 0.05 * 60 - 1

@@ -25,6 +25,7 @@ from common.controllers import make_controller
 from common.curriculum.policy_file import save_policy
 from common.evaluation import run_episode
 from common.generators import generate
+from tests.conftest import missing
 from tests.rollouts import rollout, same
 from common.scenario import BoxObstacle, CircleObstacle, LidarSpec, PolygonObstacle, Scenario, SegmentObstacle
 from common.tiers import make_world
@@ -207,6 +208,17 @@ def test_odometry_drift_grows_with_encoder_noise():
     drift = {noise: np.mean([_odometry_error(noise, seed) for seed in range(3)]) for noise in (0.0, 0.05, 0.2)}
     assert drift[0.0] < 0.05  # 4.8 m driven: what wheel slip alone leaves
     assert drift[0.0] < drift[0.05] < drift[0.2]
+
+
+def test_a_graze_that_separates_within_the_control_period_is_a_collision():
+    """The robot's side grazes a pillar 0.19 m off its path (0.01 m of overlap), is deflected and
+    clear again before the period ends: a contact at any of the 48 sub-steps counts."""
+    scenario = TEMPLATE.model_copy(update={"start": (1.0, 5.0, 0.0), "goal": (9.0, 5.0),
+                                           "obstacles": [CircleObstacle(x=1.5, y=5.19, radius=0.1)]})
+    world = World(scenario, control_period=0.2)
+    collided = [world.step(0.5, 0.0).collided for _ in range(4)]
+    assert collided == [False, False, False, True]
+    assert world.touching() == []  # separated by the period's end: its last sub-step alone says "clear"
 
 
 def test_driving_into_a_box_is_a_collision_and_the_floor_is_not():
@@ -439,7 +451,7 @@ _GUI_SMOKE = textwrap.dedent("""
 @pytest.mark.slow
 def test_human_render_opens_the_gui_under_xvfb():
     if shutil.which("Xvfb") is None:
-        pytest.skip("Xvfb is not installed")
+        missing("Xvfb")
     read, write = os.pipe()
     server = subprocess.Popen(["Xvfb", "-displayfd", str(write), "-screen", "0", "1024x768x24", "-nolisten", "tcp"],
                               pass_fds=(write,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)

@@ -11,8 +11,9 @@ from common.kinematics import wrap_angle
 from common.readings import Readings
 from common.scenario import LidarSpec, RobotProfile
 
-# The gains are tuned for 36 beams over 360° (spaced by 360°/35: the scan's first and last beams coincide).
-_REFERENCE_SPACING = 2.0 * math.pi / 35
+# The gains are tuned for the default scan, 36 beams spaced 10° (before 360° scans stopped repeating
+# their ±180° beam, 360°/35: the same 36 returns each weighing 1).
+_REFERENCE_SPACING = 2.0 * math.pi / 36
 
 
 class PotentialField(Controller):
@@ -54,7 +55,7 @@ class PotentialField(Controller):
 
     def bind(self, robot: RobotProfile, lidar: LidarSpec, goal_threshold: float = 0.3) -> None:
         super().bind(robot, lidar, goal_threshold)
-        self._beam_weight = lidar.angle_range / max(lidar.beams - 1, 1) / _REFERENCE_SPACING
+        self._beam_weight = lidar.beam_spacing / _REFERENCE_SPACING
 
     def force(self, readings: Readings, goal: tuple[float, float]) -> np.ndarray:
         """The total force (world frame) on the robot at its odometry pose."""

@@ -46,6 +46,7 @@ from common.errors import ConfigError
 from common.evaluation import Summary, evaluate
 from common.generators import get_suite
 from common.observations import DEFAULT_GOAL_DISTANCE_SCALE
+from common.report import write_csv
 from common.yaml_io import read_yaml
 
 TEST_SEED_SHIFT = 100_000
@@ -294,6 +295,10 @@ class Runner:
             normalizer = file.normalizer(venv.observation_space.shape[0]) if file is not None else None
             if normalizer is not None and isinstance(venv, VecNormalize):
                 normalizer.apply_to(venv)
+            states = file.raw_manifest.get("env_rng") if resuming else None
+            if isinstance(states, list) and len(states) == venv.num_envs:
+                for index, state in enumerate(states):
+                    venv.env_method("restore_rng", state, indices=[index])
         already = int(model.num_timesteps)
         self.eval_log.truncate(stage.name, already)
         callback = CurriculumCallback(self, index, stage, paths)
@@ -338,6 +343,7 @@ class Runner:
         (summary,) = evaluate([agent], scenarios, stage.world, seed=TEST_SEED_SHIFT, max_steps=stage.max_steps)
         figures = {"suite": stage.eval.suite, "draw": "test", "first_seed": TEST_SEED_SHIFT, **summary.to_json()}
         _write_json(policy.parent / "final_eval.json", figures)
+        atomic_write(policy.parent / "final_episodes.csv", lambda tmp: write_csv([summary], tmp))
         update_manifest(policy, {"final_eval": figures})
         return summary
 

@@ -10,7 +10,7 @@ stages:
     scenarios: {kind: sparse, difficulty: 0.5}     # or {suite: NAME} or {file: PATH}
     observation: lidar43 # nav7 | lidar43 | lidar43_log
     action_mapping: linear  # linear | rectified (common/actions.py)
-    reward: tutorial2d   # a preset or {term: weight | {weight, params}}
+    reward: default      # a preset (default, tutorial2d, tutorial3d) or {term: weight | {weight, params}}
     max_steps: 300       # episode length
     algorithm: ppo       # ppo | sac | td3
     hyperparams: {learning_rate: 3.0e-4, n_steps: 256}   # stable-baselines3's own argument names
@@ -100,7 +100,7 @@ class StageSpec(_Strict):
     scenarios: ScenarioSpec
     observation: Literal[LAYOUTS] = "lidar43"  # type: ignore[valid-type]
     action_mapping: Literal[MAPPINGS] = "linear"  # type: ignore[valid-type]
-    reward: str | dict[str, Any] = "tutorial2d"
+    reward: str | dict[str, Any] = "default"
     max_steps: Annotated[int, Field(ge=1)] = 500
     algorithm: Literal[ALGORITHMS] = "ppo"  # type: ignore[valid-type]
     hyperparams: dict[str, Any] = {}

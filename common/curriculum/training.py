@@ -80,7 +80,8 @@ class CurriculumCallback(BaseCallback):
             save_policy(model, self.paths.best, manifest, normalizer)
         if hasattr(model, "replay_buffer"):
             save_replay(model.replay_buffer, self.paths.replay)
-        save_policy(model, self.paths.last, manifest, normalizer)
+        # The envs' generators travel with the checkpoint, so a resume continues their scenario sequence.
+        save_policy(model, self.paths.last, {**manifest, "env_rng": model.get_env().env_method("rng_state")}, normalizer)
         threshold = self.stage.promote.success_rate if self.stage.promote else None
         self.promoted = threshold is not None and summary.success_rate >= threshold
         return not self.promoted
