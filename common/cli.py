@@ -57,9 +57,12 @@ def _eval(args: argparse.Namespace) -> int:
     from common.evaluation import evaluate
     from common.report import markdown_table
 
-    agents = _policies(args.policy)
-    # Each policy runs episodes as long as it trained with, unless --max-steps says otherwise.
-    summaries = evaluate(agents, _scenarios(args), args.world, seed=args.seed, max_steps=args.max_steps)
+    scenarios = _scenarios(args)
+    # Each policy runs episodes as long as, and under the conditions, it trained with, unless
+    # --max-steps and --env-kwargs say otherwise.
+    summaries = [summary for agent in _policies(args.policy)
+                 for summary in evaluate([agent], scenarios, args.world, seed=args.seed, max_steps=args.max_steps,
+                                         conditions=_conditions(args, [agent]))]
     if args.json:
         print(json.dumps(summaries[0].to_json() if len(summaries) == 1 else {s.agent: s.to_json() for s in summaries}))
     else:
@@ -146,6 +149,7 @@ def _compare(args: argparse.Namespace) -> int:
     with Progress(transient=True, console=_stderr_console()) as bar:
         task = bar.add_task(f"{source}: {len(agents)} agents x {len(scenarios)} episodes", total=len(agents) * len(scenarios))
         summaries = evaluate(agents, scenarios, args.world, seed=args.seed, max_steps=args.max_steps,
+                             conditions=_conditions(args, agents),
                              progress=lambda n: bar.advance(task, n))
     title = f"{args.world} / {source}: {len(scenarios)} episodes, seed {args.seed}"
     table = markdown_table(summaries, title)
@@ -160,6 +164,28 @@ def _compare(args: argparse.Namespace) -> int:
         print(table)
         print(f"written: {out}/comparison.md, episodes.csv, comparison.png" + "".join(f", {gif}" for gif in gifs))
     return 0
+
+
+def _conditions(args: argparse.Namespace, agents) -> "Conditions":
+    """The conditions to evaluate ``agents`` under: ``--env-kwargs``, over the conditions the
+    policies among them trained with (which must agree, so every agent meets the same world)."""
+    from common.conditions import Conditions, conditions_of
+
+    trained = {json.dumps(conditions_of(agent.env_kwargs).given(), sort_keys=True)
+               for agent in agents if hasattr(agent, "env_kwargs")}
+    override = dict(args.env_kwargs or [])
+    if len(trained) > 1 and not override:
+        raise ConfigError(None, "--policy", "these policies trained under different conditions "
+                          f"({'; '.join(sorted(trained))}); give --env-kwargs to compare them under one")
+    base = json.loads(trained.pop()) if trained and not override else {}
+    # A policy's knobs of the other tier (2D wheel dynamics in 3D, say) do not carry over.
+    resolved = Conditions.parse(base).for_tier(args.world, strict=False)
+    try:
+        extra = Conditions.parse(override, field="--env-kwargs").for_tier(args.world) if override else None
+    except ConfigError as error:
+        raise ConfigError(None, error.field if error.field.startswith("--") else f"--env-kwargs.{error.field}",
+                          error.problem) from None
+    return Conditions.parse({**resolved.given(), **(extra.given() if extra else {})}) if extra else resolved
 
 
 def _file_name(name: str) -> str:
@@ -182,7 +208,8 @@ def _record(agent, scenario, args: argparse.Namespace, gif: Path, every: int = 1
             renderer.draw(readings, true_path, caption=f"{agent.name}  t = {readings.time:.1f} s")
             frames.append(renderer.frame())
 
-    episode = run_episode(agent, scenario, args.world, seed=args.seed, max_steps=args.max_steps, on_step=record)
+    episode = run_episode(agent, scenario, args.world, seed=args.seed, max_steps=args.max_steps, on_step=record,
+                          conditions=_conditions(args, [agent]))
     return save_gif(frames, gif, fps=10 / every), episode, true_path, estimate
 
 
@@ -227,6 +254,9 @@ def _add_scenario_source(parser: argparse.ArgumentParser, episodes: int | None) 
                         help="steps before a timeout (default: a policy's own episode length, else 500)")
     parser.add_argument("--goal-threshold", type=_radius, metavar="M",
                         help="judge arrival within M metres instead of each scenario's goal radius")
+    parser.add_argument("--env-kwargs", type=_key_value, nargs="+", metavar="KEY:VALUE",
+                        help="conditions (e.g. lidar_noise:0.02 motor_scale:[0.8,1.2] robot:physics3d), "
+                             "over a policy's own (values read as YAML)")
 
 
 def _whole(low: int, high: int) -> Callable[[str], int]:
@@ -242,6 +272,20 @@ def _whole(low: int, high: int) -> Callable[[str], int]:
         return value
 
     return parse
+
+
+def _key_value(text: str) -> tuple[str, object]:
+    """An argparse type: KEY:VALUE, the value read as YAML (rl-baselines3-zoo's --env-kwargs syntax)."""
+    from common.conditions import CONDITION_KEYS
+    from common.yaml_io import parse_yaml
+
+    key, separator, value = text.partition(":")
+    if not separator or key not in CONDITION_KEYS:
+        raise argparse.ArgumentTypeError(f"expected KEY:VALUE with KEY one of {', '.join(CONDITION_KEYS)}, got {text!r}")
+    try:
+        return key, parse_yaml(value)
+    except ConfigError:
+        raise argparse.ArgumentTypeError(f"{key}: {value!r} is not a YAML value") from None
 
 
 def _radius(text: str) -> float:

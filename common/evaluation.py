@@ -16,6 +16,7 @@ from typing import Callable, Iterable, Protocol, Sequence
 import numpy as np
 from scipy import stats
 
+from common.conditions import Conditions
 from common.readings import Readings
 from common.scenario import LidarSpec, RobotProfile, Scenario
 from common.tiers import make_world
@@ -83,11 +84,14 @@ def run_episode(
     max_steps: int | None = None,
     on_step: Callable[[Readings], None] | None = None,
     shortest: float | None = None,
+    conditions: Conditions | None = None,
 ) -> Episode:
-    """Drive ``agent`` in a fresh world of ``scenario``; ``on_step`` sees every readings (e.g. to render).
-    ``max_steps`` defaults to the agent's own (see :func:`episode_limit`)."""
+    """Drive ``agent`` in a fresh world of ``scenario`` under ``conditions`` (the tier's defaults
+    where unset); ``on_step`` sees every readings (e.g. to render). ``max_steps`` defaults to the
+    agent's own (see :func:`episode_limit`)."""
     max_steps = episode_limit(agent, max_steps)
-    world = make_world(tier, scenario, seed=seed)
+    world = make_world(tier, scenario, seed=seed, conditions=conditions)
+    scenario = world.scenario  # as conditioned: the robot the agent drives, its sensors' noise
     readings = world.reset(seed=seed)
     agent.bind(scenario.robot, scenario.lidar, scenario.goal_threshold)
     agent.reset()
@@ -194,15 +198,18 @@ def evaluate(
     seed: int = 0,
     max_steps: int | None = None,
     progress: Callable[[int], None] | None = None,
+    conditions: Conditions | None = None,
 ) -> list[Summary]:
-    """Every agent on the same scenarios with the same seeds (episode i uses ``seed + i``);
-    ``max_steps`` defaults to each agent's own (see :func:`episode_limit`)."""
-    scenarios = list(scenarios)
+    """Every agent on the same scenarios with the same seeds (episode i uses ``seed + i``) under the
+    same ``conditions``; ``max_steps`` defaults to each agent's own (see :func:`episode_limit`)."""
+    resolved = (conditions or Conditions()).for_tier(tier)
+    scenarios = [resolved.scenario(s) for s in scenarios]
     shortest = [shortest_path_length(s) for s in scenarios]
     results: dict[str, list[Episode]] = {a.name: [] for a in agents}
     for agent in agents:
         for i, (scenario, best) in enumerate(zip(scenarios, shortest)):
-            results[agent.name].append(run_episode(agent, scenario, tier, seed + i, max_steps, shortest=best))
+            results[agent.name].append(run_episode(agent, scenario, tier, seed + i, max_steps, shortest=best,
+                                                   conditions=resolved))
             if progress:
                 progress(1)
     return [summarise(name, rows) for name, rows in results.items()]

@@ -16,6 +16,7 @@ from common.kinematics import wrap_angle
 from common.observations import DEFAULT_GOAL_DISTANCE_SCALE, make_layout
 from common.readings import Readings
 from common.rewards import Reward, StepContext
+from common.conditions import Conditions
 from common.errors import ConfigError, quote
 from common.scenario import MAX_LENGTH, Scenario
 from common.sources import ScenarioSource, scenario_source
@@ -35,6 +36,7 @@ class NavigationEnv(gym.Env):
     """Reach a goal without touching anything (see a tier's env class for the full description)."""
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+    tier = "flatland"  # the tier whose default conditions apply (common.conditions)
 
     def __init__(
         self,
@@ -49,10 +51,26 @@ class NavigationEnv(gym.Env):
         action_mapping: str = "linear",
         resample: bool = False,
         goal_threshold: float | Sequence[float] | None = None,
+        robot: str | Mapping[str, Any] | None = None,
+        lidar_noise: float | None = None,
+        odometry_noise: float | None = None,
+        action_delay: int | None = None,
+        motor_scale: Sequence[float] | None = None,
+        friction: Sequence[float] | None = None,
+        mass_scale: Sequence[float] | None = None,
+        control_period: float | None = None,
+        dynamics: str | None = None,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode {render_mode!r}; allowed: None, {', '.join(self.metadata['render_modes'])}")
         self.render_mode = render_mode
+        given = dict(robot=robot, lidar_noise=lidar_noise, odometry_noise=odometry_noise, action_delay=action_delay,
+                     motor_scale=motor_scale, friction=friction, mass_scale=mass_scale, control_period=control_period,
+                     dynamics=dynamics)
+        self.conditions = Conditions.parse({k: v for k, v in given.items() if v is not None}).for_tier(self.tier)
+        if self.conditions.profile is not None:
+            # Generated scenarios leave gaps sized for the robot that will drive them.
+            template = (template or Scenario()).model_copy(update={"robot": self.conditions.profile})
         self.source = scenario_source(world, difficulty, template, resample)
         self.goal_threshold = threshold_range(goal_threshold)
         self.observation_name = observation
@@ -61,6 +79,7 @@ class NavigationEnv(gym.Env):
         self.reward = Reward(reward)
         self.max_steps = int(max_steps)
         self.action_space = ACTION_SPACE
+        self._drawn: Scenario | None = None
         self._load(self.source.draw(np.random.default_rng(0)))
         self.observation_space = self.layout.space
         self._readings: Readings | None = None
@@ -72,9 +91,11 @@ class NavigationEnv(gym.Env):
     def _build_world(self, scenario: Scenario) -> WorldLike:
         raise NotImplementedError
 
-    def _load(self, scenario: Scenario) -> None:
-        """Build the world, observation layout and action mapping for a scenario."""
-        self.scenario = scenario
+    def _load(self, drawn: Scenario) -> None:
+        """Build the world, observation layout and action mapping for a drawn scenario, under the
+        env's conditions (``self.scenario`` is the scenario as conditioned: robot, sensor noise)."""
+        self._drawn = drawn
+        self.scenario = scenario = self.conditions.scenario(drawn)
         self.world = self._build_world(scenario)
         self.layout = make_layout(self.observation_name, scenario.robot, scenario.lidar, self.goal_distance_scale)
         self.actions = ActionMapping(scenario.robot, self.action_mapping)
@@ -92,9 +113,10 @@ class NavigationEnv(gym.Env):
         super().reset(seed=seed)
         if self._pending_rng is not None:
             self.np_random.bit_generator.state, self._pending_rng = self._pending_rng, None
-        scenario = self.source.draw(self.np_random, resample=bool((options or {}).get("resample", False)))
-        if scenario is not self.scenario:
-            self._load(scenario)
+        drawn = self.source.draw(self.np_random, resample=bool((options or {}).get("resample", False)))
+        if drawn is not self._drawn:
+            self._load(drawn)
+        scenario = self.scenario
         self._readings = self.world.reset(seed=int(self.np_random.integers(2**31 - 1)))
         if self.goal_threshold is not None:
             low, high = self.goal_threshold

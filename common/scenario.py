@@ -320,6 +320,8 @@ def pydantic_error(source: str | Path | None, error: ValidationError) -> ConfigE
     message = first["msg"]
     if first["type"] == "extra_forbidden":
         message = "unknown key"
+    elif first["type"] == "value_error":
+        message = message.removeprefix("Value error, ")  # our validators' messages say what they got
     elif "input" in first:
         message = f"{message} (got {quote(first['input'])})"
     return ConfigError(source, field, message)

@@ -76,7 +76,7 @@ class NavEnv(NavigationEnv):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
-        return World(scenario)
+        return World(scenario, **self.conditions.world_kwargs("flatland"))
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None or self.readings is None:

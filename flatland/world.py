@@ -17,6 +17,7 @@ import math
 import numpy as np
 import pymunk
 
+from common.actuation import Actuator, WheelDynamics
 from common.kinematics import INTEGRATORS, Pose2D, WheelOdometry, wheel_speeds, wrap_angle
 from common.polygons import convex_pieces
 from common.readings import Imu, Odometry, Readings, frozen
@@ -47,12 +48,17 @@ class World:
 
     ``reset(seed)`` puts the robot at the scenario's start; ``step(v, w)`` applies raw velocities
     (clipped to the robot's limits and acceleration window) for one ``step_time`` and returns a
-    :class:`Readings` snapshot.
+    :class:`Readings` snapshot. ``action_delay``, ``motor_scale`` and ``dynamics`` are the
+    actuation conditions of :mod:`common.conditions` (off by default: an ideal robot).
     """
 
-    def __init__(self, scenario: Scenario, seed: int | None = None) -> None:
+    def __init__(self, scenario: Scenario, seed: int | None = None, action_delay: int = 0,
+                 motor_scale: tuple[float, float] | None = None, dynamics: str = "kinematic") -> None:
         self.scenario = scenario
         self.rng = np.random.default_rng(seed)
+        robot = scenario.robot
+        wheels = WheelDynamics(robot.wheel_radius, robot.wheel_base) if dynamics == "first_order" else None
+        self.actuator = Actuator(action_delay, motor_scale, wheels)
         self.space = pymunk.Space()
         self.lidar = Lidar(scenario.lidar, *self._add_obstacles(scenario), rng=self.rng)
         self._build_robot(scenario)
@@ -137,6 +143,7 @@ class World:
         self.pose = self.scenario.start_pose
         self.velocity = (0.0, 0.0)
         self.steps = 0
+        self.actuator.reset(self.rng)
         self.odometry.reset(self.pose)
         # As in IR-SIM, contact is judged after a move: a start that overlaps may still drive out.
         self.stopped = False
@@ -149,6 +156,8 @@ class World:
             v = w = 0.0
         else:
             v, w = self._clip(float(v), float(w))
+            if not self.actuator.idle:
+                v, w = self.actuator(v, w, self._dt)
             self.pose, self.stopped = self._move(self.pose, v, w)
         previous_v = self.velocity[0]
         self.velocity = (v, w)

@@ -100,11 +100,11 @@ class WarehouseNavEnv(NavigationEnv):
     >>> observation, reward, terminated, truncated, info = env.step(env.action_space.sample())
     """
 
+    tier = "physics3d"
+
     def __init__(self, world: Any = "warehouse", observation: str = "lidar43", reward: Any = "default",
-                 template: Scenario | None = None, camera: bool = False, control_period: float | None = None,
-                 **kwargs: Any) -> None:
+                 template: Scenario | None = None, camera: bool = False, **kwargs: Any) -> None:
         self.camera = camera
-        self.control_period = control_period
         self._chase: ChaseCamera | None = None
         self._overlay: GuiOverlay | None = None
         self.world: World | None = None
@@ -113,8 +113,8 @@ class WarehouseNavEnv(NavigationEnv):
     def _build_world(self, scenario: Scenario) -> World:
         # One physics client for the env's life: a new scenario is rebuilt in it (and a GUI stays open).
         if self.world is None:
-            return World(scenario, gui=self.render_mode == "human", control_period=self.control_period,
-                         camera=self.camera)
+            return World(scenario, gui=self.render_mode == "human", camera=self.camera,
+                         **self.conditions.world_kwargs("physics3d"))
         self.world.load(scenario)
         return self.world
 

@@ -14,11 +14,10 @@ from pathlib import Path
 import pybullet as p
 
 from common.kinematics import Pose2D, wheel_speeds
-from common.scenario import LidarSpec, RobotProfile, Scenario, WorldSpec
+from common.robots import PROFILES, WHEEL_BASE, WHEEL_RADIUS
+from common.scenario import LidarSpec, Scenario, WorldSpec
 
 URDF_PATH = Path(__file__).parent / "assets" / "diff_drive.urdf"
-WHEEL_RADIUS = 0.05  # m, as in the URDF (tests/test_physics3d.py checks the two agree)
-WHEEL_BASE = 0.22  # m, between the wheels' mid-planes
 SPAWN_HEIGHT = 0.08  # m: the base link's height when the wheels and the caster rest on the floor
 # N·m per wheel, below the tyres' grip (μ N r ≈ 1.0 × 6 N × 0.05 m = 0.3 N·m): a motor that can
 # out-torque its tyres spins them at every start and turn reversal, and wheel odometry drifts by
@@ -32,8 +31,7 @@ _WHEEL_JOINTS = ("left_wheel_joint", "right_wheel_joint")
 # (PyBullet would otherwise tessellate URDF cylinders into faceted hulls, which bump as they roll).
 _URDF_FLAGS = p.URDF_USE_INERTIA_FROM_FILE | p.URDF_USE_IMPLICIT_CYLINDER
 
-ROBOT_PROFILE = RobotProfile(shape="box", length=0.3, width=0.24, wheel_radius=WHEEL_RADIUS, wheel_base=WHEEL_BASE,
-                             v_max=0.5, w_max=1.5)
+ROBOT_PROFILE = PROFILES["physics3d"]
 """The URDF robot as a profile: its footprint (body plus wheels) and the 3D tutorial's limits."""
 
 TEMPLATE = Scenario(name="physics3d", robot=ROBOT_PROFILE, lidar=LidarSpec(beams=36, range_max=5.0),
@@ -70,7 +68,9 @@ class Robot:
                                         physicsClientId=client)[4][2] - SPAWN_HEIGHT
         for link in [-1, *links.values()]:
             p.setCollisionFilterGroupMask(self.id, link, ROBOT_COLLISION_GROUP, 0xFFFF, physicsClientId=client)
-        local = p.getDynamicsInfo(self.id, -1, physicsClientId=client)[3:5]
+        info = p.getDynamicsInfo(self.id, -1, physicsClientId=client)
+        self._base_mass = info[0]
+        local = info[3:5]
         self._com_to_link = p.invertTransform(*local)
         self.drive(0.0, 0.0)
 
@@ -79,6 +79,15 @@ class Robot:
         p.setJointMotorControlArray(self.id, self.wheels, p.VELOCITY_CONTROL,
                                     targetVelocities=wheel_speeds(v, w, WHEEL_RADIUS, WHEEL_BASE),
                                     forces=(MOTOR_FORCE, MOTOR_FORCE), physicsClientId=self.client)
+
+    def set_friction(self, mu: float) -> None:
+        """Set the wheels' friction coefficient with the floor (the tyres' grip)."""
+        for wheel in self.wheels:
+            p.changeDynamics(self.id, wheel, lateralFriction=mu, physicsClientId=self.client)
+
+    def set_mass_scale(self, scale: float) -> None:
+        """Scale the body's mass (a payload) from the URDF's."""
+        p.changeDynamics(self.id, -1, mass=self._base_mass * scale, physicsClientId=self.client)
 
     def link_pose(self) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
         """World position and orientation of the body's frame (not its centre of mass)."""

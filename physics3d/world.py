@@ -15,6 +15,7 @@ import sys
 import numpy as np
 import pybullet as p
 
+from common.actuation import Actuator
 from common.kinematics import Pose2D, WheelOdometry, unicycle_exact
 from common.readings import Odometry, Readings, frozen
 from common.scenario import Scenario
@@ -43,6 +44,9 @@ class World:
         control_period: seconds per :meth:`step` (default ``scenario.world.step_time``).
         camera: also render the robot's camera into ``Readings.camera`` every step.
         imu_noise: standard deviations of the accelerometer (m/s²) and gyroscope (rad/s) noise.
+        action_delay, motor_scale, friction, mass_scale: the conditions of :mod:`common.conditions`
+            (none by default here; the env applies physics3d's realistic defaults). Ranges are
+            drawn at every reset from the world's generator.
 
     The URDF robot is always the body that drives; the scenario's robot profile supplies the
     velocity limits and the encoder noise (its acceleration limits are IR-SIM's kinematic
@@ -51,7 +55,9 @@ class World:
 
     def __init__(self, scenario: Scenario, seed: int | None = None, gui: bool = False,
                  control_period: float | None = None, camera: bool = False,
-                 imu_noise: tuple[float, float] = IMU_NOISE) -> None:
+                 imu_noise: tuple[float, float] = IMU_NOISE, action_delay: int = 0,
+                 motor_scale: tuple[float, float] | None = None, friction: tuple[float, float] | None = None,
+                 mass_scale: tuple[float, float] | None = None) -> None:
         if gui and sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
             # PyBullet's GUI waits forever for a window it cannot open; fail instead.
             raise RuntimeError("the PyBullet GUI needs an X display (DISPLAY is not set); try xvfb-run")
@@ -62,6 +68,8 @@ class World:
         self.period = self.substeps / PHYSICS_HZ
         self.rng = np.random.default_rng(seed)
         self.imu_noise = imu_noise
+        self.actuator = Actuator(action_delay, motor_scale)
+        self.friction_range, self.mass_range = friction, mass_scale
         renderer = p.ER_BULLET_HARDWARE_OPENGL if gui else p.ER_TINY_RENDERER
         self.camera = Camera(self.client, renderer=renderer) if camera else None
         self._state: int | None = None
@@ -105,6 +113,11 @@ class World:
             self.rng = np.random.default_rng(seed)
             self.lidar.rng = self.imu.rng = self.odometry.rng = self.rng
         p.restoreState(self._state, physicsClientId=self.client)
+        self.actuator.reset(self.rng)
+        if self.friction_range is not None:
+            self.robot.set_friction(float(self.rng.uniform(*self.friction_range)))
+        if self.mass_range is not None:
+            self.robot.set_mass_scale(float(self.rng.uniform(*self.mass_range)))
         self.robot.drive(0.0, 0.0)
         self.steps = 0
         self._angles = self.robot.wheel_angles()
@@ -116,7 +129,10 @@ class World:
     def step(self, v: float, w: float) -> Readings:
         """Drive with (v m/s, w rad/s), clipped to the robot's limits, for one control period."""
         v_lo, v_hi, w_lo, w_hi = self._limits
-        self.robot.drive(min(max(float(v), v_lo), v_hi), min(max(float(w), w_lo), w_hi))
+        v, w = min(max(float(v), v_lo), v_hi), min(max(float(w), w_lo), w_hi)
+        if not self.actuator.idle:
+            v, w = self.actuator(v, w, self.period)
+        self.robot.drive(v, w)
         # A contact at any sub-step counts: a graze that separates again within the control period
         # is a collision too, not only one still touching at its end.
         collided = False

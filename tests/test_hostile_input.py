@@ -276,5 +276,5 @@ def test_an_unknown_env_argument_in_a_stage_names_the_field():
 
     data = yaml.safe_load(TINY.read_text())
     data["stages"][0]["env_kwargs"] = {"gravity": 3}
-    with pytest.raises(ConfigError, match=r"c.yaml: stages.0.env_kwargs.gravity: not a flatland env argument; allowed: goal_threshold"):
+    with pytest.raises(ConfigError, match=r"c.yaml: stages.0.env_kwargs.gravity: not a flatland env argument; allowed: action_delay, dynamics, goal_threshold"):
         curriculum_from_mapping(data, "c.yaml")

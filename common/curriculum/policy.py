@@ -67,10 +67,12 @@ class PolicyAgent:
     """
 
     def __init__(self, model, observation: str, goal_distance_scale: float, normalizer: Normalizer | None = None,
-                 name: str = "policy", action_mapping: str = "linear", max_steps: int | None = None) -> None:
+                 name: str = "policy", action_mapping: str = "linear", max_steps: int | None = None,
+                 env_kwargs: dict | None = None) -> None:
         self.model, self.observation, self.goal_distance_scale = model, observation, goal_distance_scale
         self.normalizer, self.name, self.action_mapping = normalizer, name, action_mapping
         self.max_steps = max_steps
+        self.env_kwargs = dict(env_kwargs or {})  # what it trained with: its conditions are evaluated by default
 
     def bind(self, robot: RobotProfile, lidar: LidarSpec, goal_threshold: float = 0.3) -> None:
         self.layout: ObservationLayout = make_layout(self.observation, robot, lidar, self.goal_distance_scale)
@@ -104,7 +106,8 @@ def load_policy(path: str | Path, device: str = "cpu", name: str | None = None) 
         generic = stem in ("policy", "best", "last") and "curriculum" in extra and "stage" in extra
         name = f"{extra['curriculum']}/{extra['stage']}" if generic else stem
     return PolicyAgent(policy, manifest.observation, manifest.goal_distance_scale, normalizer, name=str(name),
-                       action_mapping=manifest.action_mapping, max_steps=manifest.max_steps)
+                       action_mapping=manifest.action_mapping, max_steps=manifest.max_steps,
+                       env_kwargs=manifest.env_kwargs)
 
 
 def load_weights(model, path: str | Path, policy_only: bool) -> PolicyFile | None:

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from common.actions import MAPPINGS
 from common.atomic import atomic_write
@@ -58,6 +58,18 @@ class Manifest(BaseModel):
     use_sde: bool = False
     timesteps: Annotated[int, Field(ge=0)] = 0
     n_updates: Annotated[int, Field(ge=0)] = 0
+    env_kwargs: dict[str, Any] = {}
+
+    @field_validator("env_kwargs")
+    @classmethod
+    def _valid_conditions(cls, value: dict[str, Any]) -> dict[str, Any]:
+        from common.conditions import conditions_of
+
+        try:
+            conditions_of(value)
+        except ConfigError as error:
+            raise ValueError(f"{error.field}: {error.problem}") from None
+        return value
 
 
 @dataclass(frozen=True)

@@ -41,12 +41,14 @@ from common.curriculum.hyperparams import resolve_hyperparams
 from common.curriculum.policy import PolicyAgent, algorithm_class, load_weights
 from common.curriculum.policy_file import Normalizer, update_manifest
 from common.curriculum.replay import load_replay
+from common.conditions import conditions_of
 from common.curriculum.schema import CurriculumConfig, StageSpec
 from common.errors import ConfigError
 from common.evaluation import Summary, evaluate
 from common.generators import get_suite
 from common.observations import DEFAULT_GOAL_DISTANCE_SCALE
 from common.report import write_csv
+from common.scenario import RobotProfile, Scenario
 from common.yaml_io import read_yaml
 
 TEST_SEED_SHIFT = 100_000
@@ -149,14 +151,17 @@ def _make_env_kwargs(stage: StageSpec) -> dict:
                 difficulty=spec.difficulty, action_mapping=stage.action_mapping, **stage.env_kwargs)
 
 
-def _env_id(stage: StageSpec) -> str:
+def _env_class(stage: StageSpec) -> type:
+    """The env class of a stage's tier. make_vec_env gets the class, not a registered id: a subprocess
+    env unpickles the class by its module, which imports (and registers) the tier, where an id
+    would be unknown in a fresh process ("Namespace flatland not found")."""
     if stage.world == "flatland":
-        import flatland  # noqa: F401  (registers the env)
+        from flatland.env import NavEnv
 
-        return "flatland/Nav-v0"
-    import physics3d  # noqa: F401
+        return NavEnv
+    from physics3d.env import WarehouseNavEnv
 
-    return "physics3d/WarehouseNav-v0"
+    return WarehouseNavEnv
 
 
 def _unstarted(out: Path) -> bool:
@@ -278,7 +283,7 @@ class Runner:
             torch.set_num_threads(1)  # measured: one thread is fastest for these small MLPs on 2 cores
         paths = self.stage_paths(index, stage)
         seed = self.config.seed + index
-        venv = make_vec_env(_env_id(stage), n_envs=stage.n_envs, seed=seed, env_kwargs=_make_env_kwargs(stage),
+        venv = make_vec_env(_env_class(stage), n_envs=stage.n_envs, seed=seed, env_kwargs=_make_env_kwargs(stage),
                             vec_env_cls=SubprocVecEnv if stage.vec_env == "subproc" else DummyVecEnv)
         resuming = self.resume and paths.last.exists()
         if stage.normalize:
@@ -330,7 +335,8 @@ class Runner:
         agent = PolicyAgent(model, stage.observation, DEFAULT_GOAL_DISTANCE_SCALE, normalizer, name=stage.name,
                             action_mapping=stage.action_mapping, max_steps=stage.max_steps)
         scenarios = get_suite(stage.eval.suite).scenarios(count=episodes, seed=seed_shift)
-        (summary,) = evaluate([agent], scenarios, stage.world, seed=seed_shift, max_steps=stage.max_steps)
+        (summary,) = evaluate([agent], scenarios, stage.world, seed=seed_shift, max_steps=stage.max_steps,
+                              conditions=conditions_of(stage.env_kwargs))
         return summary
 
     def final_evaluation(self, stage: StageSpec, policy: Path) -> Summary:
@@ -340,7 +346,8 @@ class Runner:
         agent = load_policy(policy, device=self.device, name=stage.name)
         episodes = stage.eval.final_episodes or stage.eval.episodes
         scenarios = get_suite(stage.eval.suite).scenarios(count=episodes, seed=TEST_SEED_SHIFT)
-        (summary,) = evaluate([agent], scenarios, stage.world, seed=TEST_SEED_SHIFT, max_steps=stage.max_steps)
+        (summary,) = evaluate([agent], scenarios, stage.world, seed=TEST_SEED_SHIFT, max_steps=stage.max_steps,
+                              conditions=conditions_of(stage.env_kwargs))
         figures = {"suite": stage.eval.suite, "draw": "test", "first_seed": TEST_SEED_SHIFT, **summary.to_json()}
         _write_json(policy.parent / "final_eval.json", figures)
         atomic_write(policy.parent / "final_episodes.csv", lambda tmp: write_csv([summary], tmp))
@@ -348,12 +355,20 @@ class Runner:
         return summary
 
 
+def training_robot(stage: StageSpec) -> RobotProfile:
+    """The robot profile a stage trains with: its conditions' (the tier's default included), else
+    the generator template's."""
+    profile = conditions_of(stage.env_kwargs).for_tier(stage.world).profile
+    return profile if profile is not None else Scenario().robot
+
+
 def manifest_for(runner: Runner, index: int, stage: StageSpec, timesteps: int, wall_time: float,
                  evaluation: dict | None) -> dict:
     """What a policy zip says about itself."""
     return {"algorithm": stage.algorithm, "observation": stage.observation,
             "goal_distance_scale": DEFAULT_GOAL_DISTANCE_SCALE, "action_mapping": stage.action_mapping,
-            "max_steps": stage.max_steps, "env_kwargs": stage.env_kwargs, "curriculum": runner.config.name, "stage": stage.name,
+            "max_steps": stage.max_steps, "env_kwargs": stage.env_kwargs, "tier": stage.world,
+            "robot": training_robot(stage).model_dump(mode="json"), "curriculum": runner.config.name, "stage": stage.name,
             "stage_index": index, "seed": runner.config.seed + index, "git_commit": runner.commit,
             "package_version": common.__version__, "timesteps": timesteps, "wall_time_s": round(wall_time, 1),
             "eval": evaluation}

@@ -34,6 +34,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from common.actions import MAPPINGS
+from common.conditions import CONDITION_KEYS, ONLY_2D, ONLY_3D, conditions_of
 from common.curriculum.hyperparams import resolve_hyperparams
 from common.curriculum.policy import algorithm_class
 from common.curriculum.policy_file import ALGORITHMS
@@ -124,22 +125,27 @@ class CurriculumConfig(_Strict):
 
 
 _MANAGED = {"policy", "env", "seed", "device", "verbose", "tensorboard_log", "_init_setup_model"}
-# Env arguments a stage sets through its own keys (world from scenarios, and so on), or that YAML
-# cannot or must not set (a template is a Scenario object; the manifest fixes the distance scale).
-_NOT_ENV_KWARGS = {"self", "world", "observation", "reward", "max_steps", "difficulty", "action_mapping", "render_mode",
-                   "kwargs", "template", "goal_distance_scale"}
+# Env arguments besides the conditions (common/conditions.py) that shape training only.
+TASK_OPTIONS = {"flatland": ("goal_threshold", "resample"), "physics3d": ("goal_threshold", "resample", "camera")}
 
 
-def env_arguments(tier: str) -> set[str]:
-    """The keyword arguments a tier's env takes beyond those a stage sets through its own keys."""
-    from common.nav_env import NavigationEnv
+def _check_env_kwargs(stage: StageSpec, source: str | Path, field: str) -> None:
+    """Every key a condition of the stage's tier or one of its task options, every value valid."""
+    other_tier = ONLY_3D if stage.world == "flatland" else ONLY_2D
+    allowed = sorted((*(k for k in CONDITION_KEYS if k not in other_tier), *TASK_OPTIONS[stage.world]))
+    for key in stage.env_kwargs:
+        if key not in allowed:
+            raise ConfigError(source, f"{field}.{key}", f"not a {stage.world} env argument; allowed: {', '.join(allowed)}")
+    try:
+        conditions_of(stage.env_kwargs, source, field).for_tier(stage.world)
+        if "goal_threshold" in stage.env_kwargs:
+            from common.nav_env import threshold_range
 
-    names = set(inspect.signature(NavigationEnv.__init__).parameters)
-    if tier == "physics3d":
-        from physics3d.env import WarehouseNavEnv
-
-        names |= set(inspect.signature(WarehouseNavEnv.__init__).parameters)
-    return names - _NOT_ENV_KWARGS
+            threshold_range(stage.env_kwargs["goal_threshold"])
+    except ConfigError as error:
+        raise ConfigError(source, error.field if error.source else f"{field}.{error.field}", error.problem) from None
+    if "resample" in stage.env_kwargs and not isinstance(stage.env_kwargs["resample"], bool):
+        raise ConfigError(source, f"{field}.resample", f"got {quote(stage.env_kwargs['resample'])}; allowed: true or false")
 
 
 def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
@@ -155,17 +161,7 @@ def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
             raise ConfigError(source, f"{field}.hyperparams.{key}",
                               f"not a {stage.algorithm.upper()} argument; allowed: {', '.join(sorted(allowed))}")
     resolve_hyperparams(stage.hyperparams, source=source, field=f"{field}.hyperparams")
-    allowed_env = env_arguments(stage.world)
-    for key in stage.env_kwargs:
-        if key not in allowed_env:
-            raise ConfigError(source, f"{field}.env_kwargs.{key}", f"not a {stage.world} env argument; allowed: {', '.join(sorted(allowed_env))}")
-    if "goal_threshold" in stage.env_kwargs:
-        from common.nav_env import threshold_range
-
-        try:
-            threshold_range(stage.env_kwargs["goal_threshold"])
-        except ConfigError as error:
-            raise ConfigError(source, f"{field}.env_kwargs.goal_threshold", error.problem) from None
+    _check_env_kwargs(stage, source, f"{field}.env_kwargs")
     if stage.init_from == "previous" and index == 0:
         raise ConfigError(source, f"{field}.init_from", "the first stage has no previous stage; allowed: null or a policy path")
     if stage.init_from not in (None, "previous") and not Path(stage.init_from).is_file():
@@ -175,17 +171,35 @@ def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
 
 
 def curriculum_from_mapping(data: dict, source: str | Path | None = None) -> CurriculumConfig:
-    """Validate a parsed curriculum mapping."""
+    """Validate a parsed curriculum mapping. Relative ``init_from`` and ``scenarios.file`` paths are
+    resolved against the file's folder (``source``), as a curriculum shared with its files expects."""
     try:
         config = CurriculumConfig.model_validate(data)
     except ValidationError as exc:
         raise pydantic_error(source, exc) from None
+    if source is not None:
+        config = _resolve_paths(config, Path(source).parent)
     for index, stage in enumerate(config.stages):
         _check_stage(stage, index, source)
     names = [stage.name for stage in config.stages]
     if len(set(names)) != len(names):
         raise ConfigError(source, "stages", f"stage names must be unique, got {names}")
     return config
+
+
+def _resolve_paths(config: CurriculumConfig, base: Path) -> CurriculumConfig:
+    def resolve(path: str) -> str:
+        return path if Path(path).is_absolute() else str((base / path).resolve())
+
+    stages = []
+    for stage in config.stages:
+        update: dict[str, Any] = {}
+        if stage.init_from not in (None, "previous"):
+            update["init_from"] = resolve(stage.init_from)
+        if stage.scenarios.file is not None:
+            update["scenarios"] = stage.scenarios.model_copy(update={"file": resolve(stage.scenarios.file)})
+        stages.append(stage.model_copy(update=update) if update else stage)
+    return config.model_copy(update={"stages": stages})
 
 
 def load_curriculum(path: str | Path) -> CurriculumConfig:

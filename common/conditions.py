@@ -1,0 +1,148 @@
+"""Conditions: what varies a world without changing its code, with the same names in both tiers.
+
+A :class:`Conditions` is a set of env keyword arguments (``gym.make(..., lidar_noise=0.02)``, a
+stage's ``env_kwargs``, ``--env-kwargs lidar_noise:0.02``). Unset knobs take the tier's default
+(:data:`TIER_DEFAULTS`): flatland is ideal unless asked; physics3d is the 3D robot with realistic
+imperfections. Ranges are drawn per episode from the world's seeded generator, so a seed still
+fixes every episode. The same conditions apply to a stage's training envs and to its evaluations,
+and a policy's manifest records them, so a policy is evaluated under the conditions it trained in
+unless a user says otherwise.
+
+=================  ======================================================  =========  ===========
+knob               meaning                                                  flatland   physics3d
+=================  ======================================================  =========  ===========
+``robot``          the robot profile: a name (``default``, ``physics3d``)    scenario's ``physics3d``
+                   or a mapping of :class:`RobotProfile` fields
+``lidar_noise``    σ of the Gaussian noise on each lidar return, m           scenario's 0.01
+``odometry_noise`` relative σ of each wheel's measured rotation              scenario's 0.01
+``action_delay``   control steps a command arrives late                      0          0
+``motor_scale``    [lo, hi]: a per-episode gain on the achieved v and w      none       [0.95, 1.05]
+``friction``       [lo, hi]: the wheels' friction coefficient per episode    (3D only)  [0.8, 1.2]
+``mass_scale``     [lo, hi]: a per-episode factor on the body's mass         (3D only)  [0.9, 1.1]
+``control_period`` seconds per step (default the scenario's step_time)       (3D only)  step_time
+``dynamics``       ``kinematic`` or ``first_order`` (wheel lag and           kinematic  (2D only)
+                   acceleration limits fitted to the 3D robot)
+=================  ======================================================  =========  ===========
+
+Why these physics3d defaults: a 2D lidar of the RPLIDAR class measures to about 1 % (1 cm at 1 m);
+wheel encoders with tyre slip err by about 1 % per wheel; motors and wheel radii vary by a few
+per cent between units and with battery charge; a warehouse floor's friction with rubber tyres
+lies around 0.8-1.2; a payload changes the mass by about a tenth. A policy that sees only a
+perfect robot learns to rely on perfection (the 3D tutorial's own warning).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from common.errors import ConfigError
+from common.robots import robot_profile
+from common.scenario import RobotProfile, Scenario
+
+Range = tuple[Annotated[float, Field(gt=0.0, le=10.0)], Annotated[float, Field(gt=0.0, le=10.0)]]
+ONLY_3D = ("friction", "mass_scale", "control_period")
+ONLY_2D = ("dynamics",)
+
+TIER_DEFAULTS: dict[str, dict[str, Any]] = {
+    "flatland": {"action_delay": 0, "dynamics": "kinematic"},
+    "physics3d": {"robot": "physics3d", "lidar_noise": 0.01, "odometry_noise": 0.01, "action_delay": 0,
+                  "motor_scale": (0.95, 1.05), "friction": (0.8, 1.2), "mass_scale": (0.9, 1.1)},
+}
+
+
+class Conditions(BaseModel):
+    """The physical conditions of a world (see the module's table); None: the tier's default."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+
+    robot: str | dict[str, Any] | None = None
+    lidar_noise: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
+    odometry_noise: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
+    action_delay: Annotated[int, Field(ge=0, le=20)] | None = None
+    motor_scale: Range | None = None
+    friction: Range | None = None
+    mass_scale: Range | None = None
+    control_period: Annotated[float, Field(gt=0.0, le=10.0)] | None = None
+    dynamics: Literal["kinematic", "first_order"] | None = None
+
+    @field_validator("robot")
+    @classmethod
+    def _known_robot(cls, value: Any) -> Any:
+        if value is not None:
+            try:
+                robot_profile(value)
+            except ConfigError as error:
+                raise ValueError(error.problem) from None
+        return value
+
+    @field_validator("motor_scale", "friction", "mass_scale")
+    @classmethod
+    def _ordered(cls, value: Range | None) -> Range | None:
+        if value is not None and value[0] > value[1]:
+            raise ValueError(f"expected [low, high] with low <= high, got {list(value)}")
+        return value
+
+    @classmethod
+    def parse(cls, values: dict[str, Any], source: str | None = None, field: str = "env_kwargs") -> "Conditions":
+        """Validate a mapping of knobs; one-line errors naming the knob."""
+        from common.scenario import pydantic_error
+
+        try:
+            return cls.model_validate(values)
+        except ValidationError as exc:
+            error = pydantic_error(None, exc)
+            raise ConfigError(source, f"{field}.{error.field}" if error.field else field, error.problem) from None
+
+    def for_tier(self, tier: str, strict: bool = True) -> "Conditions":
+        """These conditions with the tier's defaults filled in. A knob of the other tier is an error,
+        or with ``strict=False`` dropped (a 2D policy's wheel dynamics mean nothing in 3D, where
+        physics supplies them)."""
+        wrong = ONLY_3D if tier == "flatland" else ONLY_2D
+        given = self.model_dump(exclude_none=True)
+        for knob in wrong:
+            if knob in given and strict:
+                allowed = ", ".join(k for k in Conditions.model_fields if k not in wrong)
+                raise ConfigError(None, knob, f"not a {tier} knob; allowed: {allowed}")
+            given.pop(knob, None)
+        return Conditions.model_validate({**TIER_DEFAULTS[tier], **given})
+
+    def given(self) -> dict[str, Any]:
+        """The knobs set (not left to a default), as plain data for a manifest."""
+        return self.model_dump(mode="json", exclude_none=True)
+
+    @property
+    def profile(self) -> RobotProfile | None:
+        """The robot profile asked for, if any."""
+        return robot_profile(self.robot) if self.robot is not None else None
+
+    def scenario(self, scenario: Scenario) -> Scenario:
+        """``scenario`` with this robot and these sensor noises (the knobs a scenario holds)."""
+        update: dict[str, Any] = {}
+        robot = self.profile or scenario.robot
+        if self.odometry_noise is not None and self.odometry_noise != robot.encoder_noise:
+            robot = robot.model_copy(update={"encoder_noise": self.odometry_noise})
+        if robot != scenario.robot:
+            update["robot"] = robot
+        if self.lidar_noise is not None and self.lidar_noise != scenario.lidar.noise_std:
+            update["lidar"] = scenario.lidar.model_copy(update={"noise_std": self.lidar_noise})
+        return scenario.model_copy(update=update) if update else scenario
+
+    def world_kwargs(self, tier: str) -> dict[str, Any]:
+        """The keyword arguments of the tier's World that these (resolved) conditions set."""
+        kwargs: dict[str, Any] = {"action_delay": self.action_delay or 0, "motor_scale": self.motor_scale}
+        if tier == "flatland":
+            kwargs["dynamics"] = self.dynamics or "kinematic"
+        else:
+            kwargs.update(friction=self.friction, mass_scale=self.mass_scale, control_period=self.control_period)
+        return kwargs
+
+
+CONDITION_KEYS = tuple(Conditions.model_fields)
+
+
+def conditions_of(env_kwargs: dict[str, Any], source: str | None = None, field: str = "env_kwargs") -> Conditions:
+    """The conditions among a stage's or a manifest's env kwargs (the rest are task options such as
+    ``goal_threshold``, which shape training, not the world)."""
+    return Conditions.parse({k: v for k, v in env_kwargs.items() if k in CONDITION_KEYS}, source, field)

@@ -1,0 +1,115 @@
+"""Conditions (common.conditions): each knob changes what it should, in each tier, deterministically."""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+import pybullet as p
+import pytest
+
+import flatland  # noqa: F401
+import physics3d  # noqa: F401
+from common.conditions import Conditions
+from common.errors import ConfigError
+from common.robots import PROFILES
+from common.scenario import LidarSpec, Scenario, SegmentObstacle, WorldSpec
+from common.tiers import make_world
+
+OPEN = Scenario(start=(2.0, 5.0, 0.0), goal=(9.0, 5.0), world=WorldSpec(width=12.0, height=10.0))
+
+
+def _xs(world, commands) -> list[float]:
+    world.reset(seed=0)
+    return [world.step(v, w).pose[0] for v, w in commands]
+
+
+def test_action_delay_holds_each_command_back_by_whole_steps():
+    commands = [(1.0, 0.0)] * 3 + [(0.0, 0.0)] * 3
+    now = _xs(make_world("flatland", OPEN, conditions=Conditions(action_delay=0)), commands)
+    late = _xs(make_world("flatland", OPEN, conditions=Conditions(action_delay=1)), commands)
+    assert late[0] == 2.0  # the first step still carries the "stand still" the robot started with
+    np.testing.assert_allclose(late[1:], now[:-1])
+
+
+def test_lidar_noise_has_the_asked_spread_and_replays_under_a_seed():
+    wall = SegmentObstacle(points=[(4.0, 0.0), (4.0, 10.0)])
+    scenario = OPEN.model_copy(update={"obstacles": [wall], "lidar": LidarSpec(beams=720, range_max=20.0)})
+    clean = make_world("flatland", scenario, seed=1).reset().lidar
+    noisy = make_world("flatland", scenario, seed=1, conditions=Conditions(lidar_noise=0.05)).reset().lidar
+    hits = clean < 20.0
+    error = (noisy - clean)[hits]
+    assert abs(error.std() - 0.05) < 0.005 and abs(error.mean()) < 0.006  # 720 beams: ±10 % on sigma
+    again = make_world("flatland", scenario, seed=1, conditions=Conditions(lidar_noise=0.05)).reset().lidar
+    assert np.array_equal(noisy, again)
+
+
+def test_motor_scale_draws_a_gain_per_episode_within_its_range():
+    world = make_world("flatland", OPEN, conditions=Conditions(motor_scale=(0.5, 1.5)))
+    gains = []
+    for seed in range(8):
+        world.reset(seed=seed)
+        gains.append(world.step(1.0, 0.0).pose[0] - 2.0)  # 0.1 m a step at gain 1
+    assert all(0.05 <= g <= 0.15 for g in gains) and len(set(np.round(gains, 9))) == 8
+    world.reset(seed=3)
+    assert world.step(1.0, 0.0).pose[0] - 2.0 == gains[3]
+
+
+def test_first_order_dynamics_rehearse_the_3d_robots_response():
+    robot = OPEN.model_copy(update={"robot": PROFILES["physics3d"]})
+    world = make_world("flatland", robot, conditions=Conditions(dynamics="first_order"))
+    world.reset(seed=0)
+    speeds = [world.step(0.5, 0.0).velocity[0] for _ in range(3)] + [world.step(0.0, 0.0).velocity[0] for _ in range(3)]
+    # Measured on the 3D robot: 0.254, 0.493, 0.501 up; 0.245, 0.008, 0.001 down.
+    np.testing.assert_allclose(speeds, [0.25, 0.5, 0.5, 0.25, 0.0, 0.0], atol=0.01)
+    turns = [world.step(0.5, 1.5).velocity for _ in range(3)]
+    assert turns[0][1] < 0.1 and 0.6 < turns[1][1] < 0.9 and turns[2][1] == pytest.approx(1.5, abs=0.05)
+
+
+def test_the_robot_knob_swaps_the_profile_and_noise_knobs_reach_the_scenario():
+    env = gym.make("flatland/Nav-v0", world="sparse", robot="physics3d", odometry_noise=0.02, lidar_noise=0.03)
+    env.reset(seed=0)
+    scenario = env.unwrapped.scenario
+    assert scenario.robot == PROFILES["physics3d"].model_copy(update={"encoder_noise": 0.02})
+    assert scenario.lidar.noise_std == 0.03
+    assert env.unwrapped.actions.v_max == 0.5  # actions map to the 3D robot's limits
+
+
+def test_each_tier_refuses_the_other_tiers_knobs():
+    with pytest.raises(ConfigError, match="friction: not a flatland knob"):
+        gym.make("flatland/Nav-v0", friction=(0.8, 1.2))
+    with pytest.raises(ConfigError, match="dynamics: not a physics3d knob"):
+        gym.make("physics3d/WarehouseNav-v0", world="open", dynamics="first_order")
+
+
+def test_physics3d_defaults_are_the_realistic_ones():
+    env = gym.make("physics3d/WarehouseNav-v0", world="open")
+    conditions = env.unwrapped.conditions
+    assert conditions.robot == "physics3d" and conditions.lidar_noise == 0.01 and conditions.odometry_noise == 0.01
+    assert conditions.motor_scale == (0.95, 1.05) and conditions.friction == (0.8, 1.2) and conditions.mass_scale == (0.9, 1.1)
+    assert gym.make("flatland/Nav-v0").unwrapped.conditions.lidar_noise is None  # flatland: ideal unless asked
+    env.close()
+
+
+def test_physics3d_friction_and_mass_are_drawn_per_episode_and_replay():
+    world = make_world("physics3d", OPEN, conditions=Conditions(friction=(0.5, 0.7), mass_scale=(1.5, 2.0)))
+    robot = world.robot
+
+    def dynamics(seed: int) -> tuple[float, float]:
+        world.reset(seed=seed)
+        mass = p.getDynamicsInfo(robot.id, -1, physicsClientId=world.client)[0]
+        friction = p.getDynamicsInfo(robot.id, robot.wheels[0], physicsClientId=world.client)[1]
+        return mass, friction
+
+    draws = [dynamics(seed) for seed in range(4)]
+    assert all(3.0 <= mass <= 4.0 and 0.5 <= mu <= 0.7 for mass, mu in draws)  # the URDF body is 2 kg
+    assert len(set(draws)) == 4 and dynamics(2) == draws[2]
+    world.close()
+
+
+def test_a_heavier_slipperier_3d_robot_accelerates_less():
+    plain = make_world("physics3d", OPEN, conditions=Conditions(motor_scale=(1, 1), friction=(1, 1), mass_scale=(1, 1)))
+    heavy = make_world("physics3d", OPEN, conditions=Conditions(motor_scale=(1, 1), friction=(0.3, 0.3), mass_scale=(3, 3)))
+    far = [_xs(world, [(0.5, 0.0)] * 5)[-1] for world in (plain, heavy)]
+    assert far[1] < far[0] - 0.02
