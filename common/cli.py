@@ -49,6 +49,12 @@ def _run(args: argparse.Namespace) -> int:
         print(f"{name}: {result['timesteps']:,} steps in {result['wall_seconds']:.0f} s; test success "
               f"{final['success_rate']:.1%} over {final['episodes']} episodes, collisions {final['collision_rate']:.1%}, "
               f"SPL {final['spl']:.3f}; policy {out / result['policy']}")
+    transfer = state.get("transfer")
+    if transfer:
+        scratch = transfer.get("scratch_success")
+        print(f"transfer over {transfer['seeds']} seeds: zero-shot {transfer['zero_shot_success']:.1%}, fine-tuned "
+              f"{transfer['fine_tuned_success']:.1%}" + ("" if scratch is None else f", from scratch {scratch:.1%}")
+              + f"; steps to 90% validation {transfer['steps_to_90']}")
     print(f"report: {out / 'report.md'}")
     return 0
 

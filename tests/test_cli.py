@@ -9,6 +9,7 @@ import sys
 import pytest
 
 from common.cli import main
+from common.errors import ConfigError
 from common.scenario import Scenario
 
 GOOD = Scenario(name="good").to_yaml()
@@ -181,3 +182,30 @@ def test_controllers_and_policies_arrive_on_an_irsim_world_with_its_default_goal
     assert main(["compare", "--suite", "sparse", "--episodes", "3", "--goal-threshold", "0.1", "--controllers", "pid_blend",
                  "--out", str(tmp_path / "s"), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["pid_blend"]["success_rate"] == 1.0
+
+
+def test_a_policys_conditions_are_evaluated_by_default_and_the_command_line_overrides(untrained_policy, tmp_path):
+    import shutil
+
+    from common.cli import _conditions, build_parser
+    from common.curriculum.policy import load_policy
+    from common.curriculum.policy_file import update_manifest
+
+    path = tmp_path / "noisy.zip"
+    shutil.copy(untrained_policy, path)
+    update_manifest(path, {"env_kwargs": {"lidar_noise": 0.2, "robot": "physics3d", "dynamics": "first_order",
+                                          "goal_threshold": 0.1}})
+    agent = load_policy(path)
+
+    def conditions(*flags: str):
+        return _conditions(build_parser().parse_args(["eval", "--policy", str(path), *flags]), [agent])
+
+    assert conditions().model_dump(exclude_none=True) == {"robot": "physics3d", "lidar_noise": 0.2, "action_delay": 0,
+                                                           "dynamics": "first_order"}
+    assert conditions("--env-kwargs", "lidar_noise:0", "motor_scale:[0.9,1.1]").lidar_noise == 0.0
+    assert conditions("--env-kwargs", "lidar_noise:0", "motor_scale:[0.9,1.1]").motor_scale == (0.9, 1.1)
+    in_3d = conditions("--world", "physics3d")
+    assert in_3d.dynamics is None and in_3d.lidar_noise == 0.2 and in_3d.friction == (0.8, 1.2)  # 2D-only knob dropped
+    with pytest.raises(ConfigError, match="--policy: these policies trained under different conditions"):
+        _conditions(build_parser().parse_args(["compare", "--policy", str(path), str(untrained_policy)]),
+                    [agent, load_policy(untrained_policy)])

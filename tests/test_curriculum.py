@@ -320,3 +320,27 @@ def test_policy_zip_is_the_checkpoint_of_the_best_validation(tmp_path, monkeypat
     assert policy.manifest.timesteps == 2048 and policy.raw_manifest["eval"]["success_rate"] == 0.75
     assert all(torch.equal(policy.tensors("policy.pth")[key], value) for key, value in weights[1].items())
     assert PolicyFile(paths.last).manifest.timesteps == 3072
+
+
+@pytest.mark.slow
+def test_a_transfer_curriculum_writes_its_evidence(tmp_path, capsys):
+    from common.curriculum.policy_file import read_manifest
+
+    out = tmp_path / "transfer"
+    assert main(["run", str(ROOT / "tests/data/tiny_transfer.yaml"), "--out", str(out), "--no-progress"]) == 0
+    assert "transfer over 2 seeds: zero-shot" in capsys.readouterr().out
+    assert {p.name for p in (out / "evidence").iterdir()} == {"transfer-seed1000", "scratch-seed0", "scratch-seed1000"}
+    state = json.loads((out / "state.json").read_text())
+    transfer = read_manifest(out / "stages/1-three/policy.zip")["transfer"]
+    for key in ("zero_shot_success", "fine_tuned_success", "scratch_success", "steps_to_90"):
+        assert key in transfer and transfer[key] == state["transfer"][key]
+    assert set(transfer["steps_to_90"]) == {"transfer", "scratch"}
+    assert [r["seed"] for r in state["transfer"]["per_seed"]["scratch"]] == [1, 1001]  # the 3D stage's seeds
+    assert "## Transfer" in (out / "report.md").read_text() and (out / "transfer.png").stat().st_size > 1000
+    # Every arm is judged on the eval split; training draws from the train split.
+    for run in (out, *(out / "evidence").iterdir()):
+        for episodes in run.glob("stages/*/final_episodes.csv"):
+            names = {r["scenario"] for r in csv.DictReader(episodes.open())}
+            assert names and all("-eval-" in name for name in names), names
+    # The 3D stage evaluated the URDF robot under physics3d's conditions, as it trained.
+    assert read_manifest(out / "stages/1-three/policy.zip")["robot"]["v_max"] == 0.5

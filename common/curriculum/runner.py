@@ -265,6 +265,11 @@ class Runner:
             from common.curriculum.report import write_report
 
             write_report(self.out, self.config, state)
+            if self.config.evidence is not None:
+                from common.curriculum.evidence import gather_evidence
+
+                state["transfer"] = gather_evidence(self, state)
+                _write_json(self.out / "state.json", state)
         finally:
             self.release()
         return state
@@ -339,15 +344,22 @@ class Runner:
                               conditions=conditions_of(stage.env_kwargs))
         return summary
 
-    def final_evaluation(self, stage: StageSpec, policy: Path) -> Summary:
-        """The report's evaluation of a stage's policy on the test draw of its eval suite."""
+    def evaluate_policy(self, stage: StageSpec, policy: Path, test: bool = True) -> Summary:
+        """A policy zip on the stage's eval suite, under the stage's conditions: the test draw (the
+        report's) or the validation draw (the periodic evaluations')."""
         from common.curriculum.policy import load_policy
 
         agent = load_policy(policy, device=self.device, name=stage.name)
-        episodes = stage.eval.final_episodes or stage.eval.episodes
-        scenarios = get_suite(stage.eval.suite).scenarios(count=episodes, seed=TEST_SEED_SHIFT)
-        (summary,) = evaluate([agent], scenarios, stage.world, seed=TEST_SEED_SHIFT, max_steps=stage.max_steps,
+        episodes = (stage.eval.final_episodes or stage.eval.episodes) if test else stage.eval.episodes
+        first = TEST_SEED_SHIFT if test else 0
+        scenarios = get_suite(stage.eval.suite).scenarios(count=episodes, seed=first)
+        (summary,) = evaluate([agent], scenarios, stage.world, seed=first, max_steps=stage.max_steps,
                               conditions=conditions_of(stage.env_kwargs))
+        return summary
+
+    def final_evaluation(self, stage: StageSpec, policy: Path) -> Summary:
+        """The report's evaluation of a stage's policy on the test draw of its eval suite."""
+        summary = self.evaluate_policy(stage, policy)
         figures = {"suite": stage.eval.suite, "draw": "test", "first_seed": TEST_SEED_SHIFT, **summary.to_json()}
         _write_json(policy.parent / "final_eval.json", figures)
         atomic_write(policy.parent / "final_episodes.csv", lambda tmp: write_csv([summary], tmp))

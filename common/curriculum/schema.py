@@ -115,13 +115,29 @@ class StageSpec(_Strict):
     env_kwargs: dict[str, Any] = {}
 
 
+class EvidenceSpec(_Strict):
+    """Evidence for a transfer: the last stage (which starts from the previous stage's policy) is
+    also run from scratch, and both arms over several seeds (common/curriculum/evidence.py)."""
+
+    seeds: Annotated[int, Field(ge=1, le=20)] = 3
+    scratch: bool = True
+
+
 class CurriculumConfig(_Strict):
     """A curriculum: stages run in order, each optionally continuing from the previous policy."""
 
     name: str
-    seed: int = 0
+    seed: Annotated[int, Field(ge=0, le=2**31 - 1)] = 0
     device: Literal["auto", "cpu", "cuda", "mps"] = "auto"
     stages: Annotated[list[StageSpec], Field(min_length=1)]
+    evidence: EvidenceSpec | None = None
+
+    @model_validator(mode="after")
+    def _evidence_needs_a_transfer(self) -> "CurriculumConfig":
+        if self.evidence is not None and (len(self.stages) < 2 or self.stages[-1].init_from != "previous"):
+            raise ValueError("evidence compares a transfer with training from scratch: the last stage must have "
+                             "init_from: previous")
+        return self
 
 
 _MANAGED = {"policy", "env", "seed", "device", "verbose", "tensorboard_log", "_init_setup_model"}
