@@ -200,23 +200,10 @@ def _file_name(name: str) -> str:
 
 
 def _record(agent, scenario, args: argparse.Namespace, gif: Path, every: int = 1):
-    """Drive one episode and write it as a GIF; return the GIF, the episode and both paths."""
-    from common.evaluation import run_episode
-    from flatland.render import Renderer, save_gif
+    from flatland.render import record_agent
 
-    renderer = Renderer(scenario)
-    frames, true_path, estimate = [], [], []
-
-    def record(readings) -> None:
-        true_path.append(readings.pose[:2])
-        estimate.append(readings.odometry.pose[:2])
-        if len(true_path) % every == 1 or every == 1:
-            renderer.draw(readings, true_path, caption=f"{agent.name}  t = {readings.time:.1f} s")
-            frames.append(renderer.frame())
-
-    episode = run_episode(agent, scenario, args.world, seed=args.seed, max_steps=args.max_steps, on_step=record,
-                          conditions=_conditions(args, [agent]))
-    return save_gif(frames, gif, fps=10 / every), episode, true_path, estimate
+    return record_agent(agent, scenario, gif, tier=args.world, seed=args.seed, max_steps=args.max_steps, every=every,
+                        conditions=_conditions(args, [agent]))
 
 
 def _render(args: argparse.Namespace) -> int:

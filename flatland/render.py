@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Callable, NamedTuple, Sequence
 
 import numpy as np
 from matplotlib import patches
@@ -18,6 +18,10 @@ from matplotlib.figure import Figure
 
 from common.readings import Readings
 from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, SegmentObstacle
+
+if TYPE_CHECKING:
+    from common.conditions import Conditions
+    from common.evaluation import Episode
 
 
 def _obstacle_patch(obstacle) -> patches.Patch | None:
@@ -149,6 +153,37 @@ def save_gif(frames: Sequence[np.ndarray], path: str | Path, fps: float = 10.0) 
     images = [Image.fromarray(frame) for frame in frames]
     images[0].save(path, save_all=True, append_images=images[1:], duration=int(round(1000 / fps)), loop=0)
     return path
+
+
+class RecordedEpisode(NamedTuple):
+    """An agent's episode as a GIF, with its outcome and the true and odometry paths."""
+
+    gif: Path
+    episode: "Episode"
+    true_path: list
+    estimate: list
+
+
+def record_agent(agent, scenario: Scenario, path: str | Path, tier: str = "flatland", seed: int = 0,
+                 max_steps: int | None = None, every: int = 1, conditions: "Conditions | None" = None) -> RecordedEpisode:
+    """Drive one episode of any agent (controller or policy) and write it as a GIF seen from above,
+    keeping every ``every``-th frame; either tier (the 3D one drawn in 2D), under ``conditions``."""
+    from common.conditions import Conditions
+    from common.evaluation import run_episode
+
+    scenario = (conditions or Conditions()).for_tier(tier).scenario(scenario)  # draw the robot that drives
+    renderer = Renderer(scenario)
+    frames, true_path, estimate = [], [], []
+
+    def record(readings: Readings) -> None:
+        true_path.append(readings.pose[:2])
+        estimate.append(readings.odometry.pose[:2])
+        if len(true_path) % every == 1 or every == 1:
+            renderer.draw(readings, true_path, caption=f"{agent.name}  t = {readings.time:.1f} s")
+            frames.append(renderer.frame())
+
+    episode = run_episode(agent, scenario, tier, seed=seed, max_steps=max_steps, on_step=record, conditions=conditions)
+    return RecordedEpisode(save_gif(frames, path, fps=10 / every), episode, true_path, estimate)
 
 
 def record_episode(env, act: Callable[[np.ndarray], np.ndarray], path: str | Path, seed: int | None = None,
