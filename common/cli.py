@@ -59,6 +59,27 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _sweep(args: argparse.Namespace) -> int:
+    from common.curriculum.sweep import run_sweep
+
+    try:
+        import ray  # noqa: F401
+        import optuna  # noqa: F401
+    except ImportError:
+        raise ConfigError(None, "sweep", "needs Ray Tune and Optuna: pip install -e \".[sweep]\"") from None
+    out = Path(args.out) if args.out else Path("runs") / "sweeps" / Path(args.file).stem
+    results = run_sweep(args.file, out, seeds=args.seeds, space=args.space, trials=args.trials, metric=args.metric,
+                        address=args.address, cpus_per_trial=args.cpus_per_trial, max_failures=args.max_failures,
+                        resume=args.resume, device=args.device)
+    for name, agg in results["aggregate"].items():
+        if agg["iqm"] is not None:
+            print(f"test {name}: IQM {agg['iqm']:.3f} (95% CI {agg['ci95'][0]:.3f}-{agg['ci95'][1]:.3f}), mean "
+                  f"{agg['mean']:.3f}, over {agg['n']} trials")
+    print(f"{len(results['trials'])} trials, {results['concurrent_trials']} at a time, {results['wall_seconds']:.0f} s; "
+          f"results: {out / 'sweep.md'}")
+    return 0
+
+
 def _eval(args: argparse.Namespace) -> int:
     from common.evaluation import evaluate
     from common.report import markdown_table
@@ -321,6 +342,21 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--device", choices=["auto", "cpu", "cuda", "mps"], help="overrides the curriculum's device")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     run.set_defaults(handler=_run)
+
+    sweep = commands.add_parser("sweep", help="a curriculum over seeds, or a search, as Ray Tune trials (local or a cluster)")
+    sweep.add_argument("file", metavar="FILE.yaml")
+    sweep.add_argument("--seeds", type=_whole(1, 1000), default=1, help="runs with seeds SEED + 1000·k (default 1)")
+    sweep.add_argument("--space", metavar="SPACE.yaml", help="a search space: dotted curriculum paths -> distributions")
+    sweep.add_argument("--trials", type=_whole(1, 10_000), default=8, help="trials of a search (default 8)")
+    sweep.add_argument("--metric", default="success_rate", choices=["success_rate", "spl"], help="what a search maximises")
+    sweep.add_argument("--address", metavar="HOST:PORT", help="an existing Ray cluster (default: a local one, in-process)")
+    sweep.add_argument("--cpus-per-trial", type=float, default=1.0, metavar="K", help="CPUs each trial holds (default 1)")
+    sweep.add_argument("--max-failures", type=_whole(0, 100), default=2, metavar="F",
+                       help="retries of a trial whose process dies (default 2)")
+    sweep.add_argument("--out", metavar="DIR", help="sweep directory (default runs/sweeps/NAME)")
+    sweep.add_argument("--resume", action="store_true", help="continue an interrupted sweep")
+    sweep.add_argument("--device", choices=["auto", "cpu", "cuda", "mps"], help="overrides the curriculum's device")
+    sweep.set_defaults(handler=_sweep)
 
     evaluate = commands.add_parser("eval", help="evaluate trained policies on a suite or a scenario file")
     evaluate.add_argument("--policy", nargs="+", required=True, metavar="ZIP")

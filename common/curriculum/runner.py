@@ -31,6 +31,7 @@ import subprocess
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import yaml
 from filelock import FileLock, Timeout
@@ -186,10 +187,11 @@ class Runner:
     """Runs a validated curriculum into a run directory."""
 
     def __init__(self, config: CurriculumConfig, out: Path, resume: bool = False, device: str | None = None,
-                 progress: bool = True) -> None:
+                 progress: bool = True, on_evaluation: Callable[[dict], None] | None = None) -> None:
         self.config, self.out, self.resume = config, Path(out), resume
         self.device = resolve_device(device or config.device)
         self.progress = progress
+        self.on_evaluation = on_evaluation  # sees every periodic evaluation's eval.csv row (a sweep reports them)
         self.eval_log: EvalLog | None = None
         self.commit: str | None = None
         self._lock: FileLock | None = None

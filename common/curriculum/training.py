@@ -66,12 +66,13 @@ class CurriculumCallback(BaseCallback):
         normalizer = self._normalizer(model)
         summary = self.runner.evaluate_model(model, self.stage, normalizer, self.stage.eval.episodes, seed_shift=0)
         timesteps = int(model.num_timesteps)
-        self.runner.eval_log.append({
+        row = {
             "stage": self.stage.name, "timesteps": timesteps, "wall_time": round(self.wall_time(), 1),
             "success_rate": summary.success_rate, "collision_rate": summary.collision_rate,
             "timeout_rate": summary.timeout_rate, "stuck_rate": summary.stuck_rate, "spl": round(summary.spl, 4),
             "mean_steps": "" if summary.mean_steps is None else round(summary.mean_steps, 1),
-        })
+        }
+        self.runner.eval_log.append(row)
         self.last_eval_at = timesteps
         manifest = manifest_for(self.runner, self.index, self.stage, timesteps, self.wall_time(),
                                 {"suite": self.stage.eval.suite, "draw": "validation", **summary.to_json()})
@@ -82,6 +83,8 @@ class CurriculumCallback(BaseCallback):
             save_replay(model.replay_buffer, self.paths.replay)
         # The envs' generators travel with the checkpoint, so a resume continues their scenario sequence.
         save_policy(model, self.paths.last, {**manifest, "env_rng": model.get_env().env_method("rng_state")}, normalizer)
+        if self.runner.on_evaluation is not None:
+            self.runner.on_evaluation(row)  # after the checkpoint: a sweep may stop the trial here
         threshold = self.stage.promote.success_rate if self.stage.promote else None
         self.promoted = threshold is not None and summary.success_rate >= threshold
         return not self.promoted

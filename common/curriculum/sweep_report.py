@@ -1,0 +1,132 @@
+"""A sweep's results: sweep.json (trials and aggregates), sweep.md (tables), sweep.png (curves)."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from common.atomic import atomic_write
+from common.curriculum.sweep import METRICS, aggregate
+
+
+def _trial(result) -> dict[str, Any]:
+    config, metrics = result.config, result.metrics or {}
+    status = "done" if metrics.get("done") else ("error" if result.error else "stopped early")
+    return {"seed": config["seed"], "params": config.get("params") or {}, "status": status,
+            "final": metrics.get("final"), "run_dir": metrics.get("run_dir"), "node": metrics.get("node"),
+            "error": None if result.error is None else str(result.error).splitlines()[0][:200]}
+
+
+def _curve(run_dir: str | None) -> list[tuple[int, float]]:
+    """Validation success against the last stage's timesteps."""
+    path = Path(run_dir or "") / "eval.csv"
+    if not path.is_file():
+        return []
+    rows = list(csv.DictReader(path.open(newline="")))
+    last = rows[-1]["stage"] if rows else None
+    return [(int(r["timesteps"]), float(r["success_rate"])) for r in rows if r["stage"] == last]
+
+
+def write_results(out: Path, grid, metric: str, address: str | None, concurrent: int, wall_seconds: float,
+                  searched: bool) -> dict[str, Any]:
+    trials = sorted((_trial(result) for result in grid), key=lambda t: (t["seed"], json.dumps(t["params"], sort_keys=True)))
+    done = [t for t in trials if t["final"] is not None]
+    results = {
+        "backend": "ray", "address": address or "local", "metric": metric, "concurrent_trials": concurrent,
+        "wall_seconds": round(wall_seconds, 1), "trials": trials,
+        "aggregate": {m: aggregate([t["final"][m] for t in done]) for m in METRICS},
+    }
+    if searched and done:
+        best = max(done, key=lambda t: t["final"][metric])
+        results["best"] = {"params": best["params"], "seed": best["seed"], metric: best["final"][metric]}
+    atomic_write(out / "sweep.json", lambda tmp: tmp.write_text(json.dumps(results, indent=2)))
+    atomic_write(out / "sweep.md", lambda tmp: tmp.write_text(_markdown(results)))
+    _figure(trials, results, out / "sweep.png", searched)
+    return results
+
+
+def _markdown(results: dict[str, Any]) -> str:
+    lines = [f"# Sweep ({results['backend']}, {results['address']})", "",
+             f"{len(results['trials'])} trials, {results['concurrent_trials']} at a time, {results['wall_seconds']:.0f} s.",
+             "", "| seed | parameters | status | test success | test SPL | run directory |", "|---:|---|---|---:|---:|---|"]
+    for t in results["trials"]:
+        params = ", ".join(f"{k.split('.')[-1]}={v:.4g}" if isinstance(v, float) else f"{k.split('.')[-1]}={v}"
+                           for k, v in t["params"].items()) or "–"
+        final = t["final"] or {}
+        success = "–" if not final else f"{final['success_rate']:.1%}"
+        spl = "–" if not final else f"{final['spl']:.3f}"
+        lines.append(f"| {t['seed']} | {params} | {t['status']} | {success} | {spl} | {t['run_dir'] or '–'} |")
+    lines += ["", "| metric | trials | mean | IQM | IQM 95% CI (bootstrap) |", "|---|---:|---:|---:|---:|"]
+    for name, agg in results["aggregate"].items():
+        if agg["iqm"] is None:
+            continue
+        lo, hi = agg["ci95"]
+        lines.append(f"| test {name} | {agg['n']} | {agg['mean']:.3f} | {agg['iqm']:.3f} | {lo:.3f} – {hi:.3f} |")
+    lines += ["", "![sweep](sweep.png)", ""]
+    return "\n".join(lines)
+
+
+def _figure(trials: list[dict], results: dict[str, Any], path: Path, searched: bool) -> None:
+    figure = Figure(figsize=(11 if searched else 7, 4), dpi=100)
+    FigureCanvasAgg(figure)
+    ax = figure.add_subplot(1, 2 if searched else 1, 1)
+    curves = [dict(_curve(t["run_dir"])) for t in trials]
+    for trial, curve in zip(trials, curves):
+        if curve:
+            ax.plot(list(curve), list(curve.values()), color="tab:blue", alpha=0.35, linewidth=1,
+                    label="each trial" if trial is trials[0] else None)
+    common = sorted(set.intersection(*(set(c) for c in curves if c))) if any(curves) else []
+    if common:
+        values = np.array([[c[s] for c in curves if c] for s in common])
+        ax.plot(common, values.mean(axis=1), color="tab:blue", linewidth=2.5, label="mean")
+        ax.fill_between(common, values.min(axis=1), values.max(axis=1), color="tab:blue", alpha=0.15, label="range")
+    agg = results["aggregate"]["success_rate"]
+    title = "validation success of the last stage"
+    if agg["iqm"] is not None:
+        title += f"\ntest IQM {agg['iqm']:.3f} (95% CI {agg['ci95'][0]:.3f}–{agg['ci95'][1]:.3f}, n={agg['n']})"
+    ax.set_title(title, fontsize=9)
+    ax.set_xlabel("timesteps")
+    ax.set_ylim(0, 1.02)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="lower right")
+    if searched:
+        _importance(figure.add_subplot(1, 2, 2), trials, results["metric"])
+    figure.tight_layout()
+    figure.savefig(path)
+
+
+def _importance(ax, trials: list[dict], metric: str) -> None:
+    """Optuna's parameter importance (fANOVA) over the finished trials."""
+    import optuna
+
+    done = [t for t in trials if t["final"] is not None and t["params"]]
+    if len(done) < 2:
+        ax.set_axis_off()
+        return
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    study = optuna.create_study(direction="maximize")
+    keys = list(done[0]["params"])
+    distributions = {k: _distribution([d["params"][k] for d in done]) for k in keys}
+    for t in done:
+        params = {k: t["params"][k] if isinstance(distributions[k], optuna.distributions.FloatDistribution)
+                  else json.dumps(t["params"][k]) for k in keys}
+        study.add_trial(optuna.trial.create_trial(params=params, distributions=distributions, value=t["final"][metric]))
+    importances = optuna.importance.get_param_importances(study, evaluator=optuna.importance.FanovaImportanceEvaluator(seed=0))
+    names = list(importances)
+    ax.barh([n.split(".")[-1] for n in names], [importances[n] for n in names], color="tab:orange")
+    ax.set_title(f"parameter importance for test {metric} (fANOVA)", fontsize=9)
+
+
+def _distribution(values: list):
+    import optuna
+
+    if all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values):
+        low, high = float(min(values)), float(max(values))
+        return optuna.distributions.FloatDistribution(low, high if high > low else low + 1e-12)
+    return optuna.distributions.CategoricalDistribution(sorted({json.dumps(v) for v in values}))

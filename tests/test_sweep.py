@@ -1,0 +1,117 @@
+"""``curriculum sweep`` on Ray Tune: aggregates, a local sweep, two nodes, a retried trial, a resumed sweep."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from common.cli import main
+from common.curriculum.sweep import aggregate
+
+pytest.importorskip("ray")
+ROOT = Path(__file__).resolve().parents[1]
+TINY = ROOT / "tests" / "data" / "tiny_sweep.yaml"
+
+
+def test_the_aggregate_is_the_interquartile_mean_with_a_bootstrap_interval():
+    values = [0.2, 0.9, 0.95, 1.0, 0.5, 0.85, 0.9, 0.7]
+    result = aggregate(values)
+    middle = sorted(values)[2:6]  # 8 values: the middle half is the 3rd to the 6th
+    assert result["iqm"] == pytest.approx(sum(middle) / 4) and result["mean"] == pytest.approx(np.mean(values))
+    low, high = result["ci95"]
+    assert low < result["iqm"] < high and 0.2 <= low and high <= 1.0
+    # The same interval by hand: resample, take each resample's IQM, read the 2.5 and 97.5 percentiles.
+    rng = np.random.default_rng(1)
+    boot = [stats.trim_mean(rng.choice(values, len(values)), 0.25) for _ in range(4000)]
+    assert abs(low - np.percentile(boot, 2.5)) < 0.03 and abs(high - np.percentile(boot, 97.5)) < 0.03
+    assert aggregate([0.9])["ci95"] == [0.9, 0.9] and aggregate([])["iqm"] is None
+
+
+def test_an_unreachable_cluster_is_a_one_line_error_within_seconds(tmp_path):
+    began = time.perf_counter()
+    result = subprocess.run([sys.executable, "-m", "common.cli", "sweep", str(TINY), "--address", "127.0.0.1:9",
+                             "--out", str(tmp_path / "s")], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and "--address: no Ray cluster answers at 127.0.0.1:9" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1 and time.perf_counter() - began < 30
+
+
+def _trials(out: Path) -> list[dict]:
+    return json.loads((out / "sweep.json").read_text())["trials"]
+
+
+@pytest.mark.slow
+def test_a_seed_sweep_runs_each_seed_as_an_ordinary_run_and_aggregates(tmp_path, capsys):
+    out = tmp_path / "sweep"
+    assert main(["sweep", str(TINY), "--seeds", "2", "--out", str(out)]) == 0
+    assert "test success_rate: IQM" in capsys.readouterr().out
+    trials = _trials(out)
+    assert [t["seed"] for t in trials] == [0, 1000] and {t["status"] for t in trials} == {"done"}
+    for trial in trials:
+        run = Path(trial["run_dir"])
+        assert (run / "report.md").exists() and json.loads((run / "run.json").read_text())["seed"] == trial["seed"]
+    results = json.loads((out / "sweep.json").read_text())
+    assert results["backend"] == "ray" and results["aggregate"]["success_rate"]["n"] == 2
+    assert (out / "sweep.png").stat().st_size > 1000 and "| metric |" in (out / "sweep.md").read_text()
+    # A sweep directory is not reused by accident.
+    assert main(["sweep", str(TINY), "--seeds", "2", "--out", str(out)]) == 2
+
+
+@pytest.mark.slow
+def test_trials_spread_over_the_nodes_of_a_cluster(tmp_path):
+    from ray.cluster_utils import Cluster
+
+    from common.curriculum.sweep import run_sweep
+
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1})
+    cluster.add_node(num_cpus=1)
+    try:
+        results = run_sweep(TINY, tmp_path / "sweep", seeds=2, address=cluster.address)
+    finally:
+        cluster.shutdown()
+    assert {t["status"] for t in results["trials"]} == {"done"}
+    assert len({t["node"] for t in results["trials"]}) == 2, results["trials"]  # one trial on each node
+
+
+@pytest.mark.slow
+def test_a_trial_whose_process_dies_is_retried_from_its_checkpoint(tmp_path, monkeypatch):
+    from common.curriculum.sweep import run_sweep
+    from tests.sweep_faults import crash_once
+
+    monkeypatch.setenv("PYTHONPATH", str(ROOT))  # the workers import the fault injector from tests/
+    out = tmp_path / "sweep"
+    results = run_sweep(TINY, out, seeds=1, max_failures=1, trainable=crash_once)
+    (trial,) = results["trials"]
+    crashed_at = int((out / "crashed-seed0").read_text())
+    assert trial["status"] == "done" and crashed_at == 128
+    rows = [int(r["timesteps"]) for r in csv.DictReader((Path(trial["run_dir"]) / "eval.csv").open())]
+    assert rows == [128, 256, 384, 512]  # the evaluation before the crash kept, none repeated
+
+
+@pytest.mark.slow
+def test_an_interrupted_sweep_continues_with_resume(tmp_path):
+    out = tmp_path / "sweep"
+    driver = subprocess.Popen([sys.executable, "-m", "common.cli", "sweep", str(TINY), "--seeds", "2", "--out", str(out)],
+                              cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    deadline = time.time() + 240
+    while time.time() < deadline and not list(out.glob("trials/*/eval.csv")):
+        time.sleep(0.2)
+    while time.time() < deadline and not list((out / "ray").glob("experiment_state*.json")):
+        time.sleep(0.2)
+    assert driver.poll() is None, "the sweep ended before it could be interrupted"
+    os.killpg(driver.pid, signal.SIGKILL)  # the driver and the local Ray it started
+    driver.wait()
+    assert not (out / "sweep.json").exists()
+    resumed = subprocess.run([sys.executable, "-m", "common.cli", "sweep", str(TINY), "--seeds", "2", "--out", str(out),
+                              "--resume"], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    assert [t["status"] for t in _trials(out)] == ["done", "done"]
