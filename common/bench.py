@@ -205,6 +205,35 @@ def camera_fps(scenario: Scenario, frames: int = 100) -> float:
     return frames / elapsed
 
 
+def reset_ms(repeats: int = 30) -> dict[str, float]:
+    """Median milliseconds to draw a new scenario of each generator kind, and to redraw a random
+    IR-SIM world file (31 random circles, as IR-SIM's examples have) from its parse."""
+    from common.generators import KINDS, generate
+    from common.world_file import WorldFile
+
+    def median_ms(draw) -> float:
+        draw(0)  # warm-up: numba kernels compiled or loaded from cache
+        times = []
+        for seed in range(1, repeats + 1):
+            began = time.perf_counter()
+            draw(seed)
+            times.append(time.perf_counter() - began)
+        return round(1000 * float(np.median(times)), 2)
+
+    figures = {f"reset_ms_{kind}": median_ms(lambda seed, kind=kind: generate(kind, seed)) for kind in KINDS}
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "random.yaml"
+        path.write_text(yaml.safe_dump({
+            "world": {"width": 10, "height": 10},
+            "robot": {"kinematics": {"name": "diff"}, "state": [1, 1, 0], "goal": [9, 9, 0]},
+            "obstacle": [{"number": 31, "distribution": {"name": "random", "range_low": [1.5, 1.5, 0],
+                                                         "range_high": [8.5, 8.5, 0]},
+                          "shape": {"name": "circle", "radius": 0.2}}]}))
+        file = WorldFile(path)
+        figures["reset_ms_irsim_random"] = median_ms(file.scenario)
+    return figures
+
+
 def run_benchmarks(steps: int = 20_000) -> dict[str, Any]:
     """All figures of this milestone, as one flat mapping."""
     scenario = bench_scenario()
@@ -226,4 +255,5 @@ def run_benchmarks(steps: int = 20_000) -> dict[str, Any]:
         "bare_pybullet_steps_per_s": round(bare3d, 1),
         "physics3d_vs_bare": round(env3d / bare3d, 3),
         "camera_fps": round(camera_fps(scenario3d), 1),
+        **reset_ms(),
     }

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable, Iterator, Literal
+from typing import Callable, Iterator, Literal, NamedTuple
 
 import numpy as np
 
@@ -25,15 +25,30 @@ _SPLIT_IDS = {"train": 0, "eval": 1}
 _MAX_ATTEMPTS = 200
 
 
-def _outline(obstacle: Obstacle, per_side: int = 8) -> np.ndarray:
+_CIRCLE_POINTS = 32
+_UNIT_CIRCLE = np.column_stack([np.cos(np.linspace(0.0, 2.0 * math.pi, _CIRCLE_POINTS, endpoint=False)),
+                                np.sin(np.linspace(0.0, 2.0 * math.pi, _CIRCLE_POINTS, endpoint=False))])
+_SIDE_STEPS = np.linspace(0.0, 1.0, 8, endpoint=False)[:, None]
+
+
+def _outline(obstacle: Obstacle) -> np.ndarray:
     """Points along the obstacle's boundary (enough to measure gaps between convex shapes)."""
     if isinstance(obstacle, CircleObstacle):
-        angles = np.linspace(0.0, 2.0 * math.pi, 4 * per_side, endpoint=False)
-        return np.column_stack([obstacle.x + obstacle.radius * np.cos(angles), obstacle.y + obstacle.radius * np.sin(angles)])
+        return _UNIT_CIRCLE * obstacle.radius + (obstacle.x, obstacle.y)
     assert isinstance(obstacle, BoxObstacle)
     corners = obstacle.corners()
-    t = np.linspace(0.0, 1.0, per_side, endpoint=False)[:, None]
-    return np.concatenate([a + t * (b - a) for a, b in zip(corners, np.roll(corners, -1, axis=0))])
+    ends = np.roll(corners, -1, axis=0)
+    # Each side's eight points (its start included), sides in order: as 8 steps along each edge.
+    return (corners[:, None, :] + _SIDE_STEPS[None] * (ends - corners)[:, None, :]).reshape(-1, 2)
+
+
+class _Placed(NamedTuple):
+    """An obstacle with what the gap checks need of it."""
+
+    obstacle: Obstacle
+    outline: np.ndarray
+    centre: np.ndarray
+    radius: float
 
 
 class _Layout:
@@ -44,40 +59,45 @@ class _Layout:
         self.rng = rng
         self.start, self.goal = start, goal
         self.clearance = 2.0 * template.robot.bounding_radius + 0.05
-        self.obstacles: list[Obstacle] = []
-        self.outlines: list[np.ndarray] = []
-        self.centres: list[np.ndarray] = []
-        self.radii: list[float] = []
+        world, margin = template.world, self.clearance
+        self._low = np.array(world.offset) + margin
+        self._high = np.array(world.offset) + (world.width - margin, world.height - margin)
+        self._ends = np.array([start[:2], goal])
+        self.placed: list[_Placed] = []
+        self._centres = np.zeros((0, 2))
+        self._radii = np.zeros(0)
 
-    def fits(self, obstacle: Obstacle) -> bool:
+    @property
+    def obstacles(self) -> list[Obstacle]:
+        return [p.obstacle for p in self.placed]
+
+    def fits(self, obstacle: Obstacle) -> _Placed | None:
+        """The obstacle ready to place, or None if it crowds a wall, the start, the goal or another."""
         outline = _outline(obstacle)
-        world, margin = self.template.world, self.clearance
-        low = np.array(world.offset) + margin
-        high = np.array(world.offset) + (world.width - margin, world.height - margin)
-        if (outline < low).any() or (outline > high).any():
-            return False
-        ends = np.array([self.start[:2], self.goal])
-        if obstacle.sdf(ends).min() < self.template.robot.bounding_radius + 0.3:
-            return False
-        centre, radius = outline.mean(axis=0), np.hypot(*(outline - outline.mean(axis=0)).T).max()
-        return all(
-            np.hypot(*(centre - other_centre)) >= radius + other_radius + self.clearance
-            or (other.sdf(outline).min() >= self.clearance and obstacle.sdf(other_outline).min() >= self.clearance)
-            for other, other_outline, other_centre, other_radius in zip(
-                self.obstacles, self.outlines, self.centres, self.radii)
-        )
+        if (outline < self._low).any() or (outline > self._high).any():
+            return None
+        if obstacle.sdf(self._ends).min() < self.template.robot.bounding_radius + 0.3:
+            return None
+        centre = outline.mean(axis=0)
+        radius = float(np.hypot(*(outline - centre).T).max())
+        # Bounding circles apart by the clearance: no closer look needed. Only the near ones are
+        # measured outline to outline (the shapes are convex, so their outlines' gaps are theirs).
+        near = np.flatnonzero(np.hypot(*(self._centres - centre).T) < radius + self._radii + self.clearance)
+        for index in near:
+            other = self.placed[index]
+            if other.obstacle.sdf(outline).min() < self.clearance or obstacle.sdf(other.outline).min() < self.clearance:
+                return None
+        return _Placed(obstacle, outline, centre, radius)
 
     def add(self, propose: Callable[[], Obstacle], count: int, tries: int = 60) -> bool:
         """Place ``count`` obstacles from ``propose``; False if one found no free place in ``tries``."""
         for _ in range(count):
             for _ in range(tries):
-                candidate = propose()
-                if self.fits(candidate):
-                    self.obstacles.append(candidate)
-                    outline = _outline(candidate)
-                    self.outlines.append(outline)
-                    self.centres.append(outline.mean(axis=0))
-                    self.radii.append(float(np.hypot(*(outline - self.centres[-1]).T).max()))
+                placed = self.fits(propose())
+                if placed is not None:
+                    self.placed.append(placed)
+                    self._centres = np.vstack([self._centres, placed.centre])
+                    self._radii = np.append(self._radii, placed.radius)
                     break
             else:
                 return False
