@@ -54,14 +54,22 @@ def test_warehouse_has_31_obstacles():
         assert len(generate("warehouse", seed, 1.0).obstacles) == 31
 
 
+def _dense_outline(obstacle) -> np.ndarray:
+    """256 points along a circle's or a box's boundary: finer than the generator's own check."""
+    t = np.linspace(0.0, 1.0, 64, endpoint=False)[:, None]
+    if isinstance(obstacle, CircleObstacle):
+        angles = 2 * np.pi * np.linspace(0.0, 1.0, 256, endpoint=False)
+        return np.column_stack([obstacle.x + obstacle.radius * np.cos(angles), obstacle.y + obstacle.radius * np.sin(angles)])
+    corners = obstacle.corners()
+    return np.concatenate([a + t * (b - a) for a, b in zip(corners, np.roll(corners, -1, axis=0))])
+
+
 def _min_gap(scenario: Scenario) -> float:
     """Smallest distance between two obstacles, measured on one's outline against the other's SDF."""
-    from common.generators import _outline
-
     gaps = []
     for i, a in enumerate(scenario.obstacles):
         for b in scenario.obstacles[i + 1:]:
-            gaps.append(min(b.sdf(_outline(a, 64)).min(), a.sdf(_outline(b, 64)).min()))
+            gaps.append(min(b.sdf(_dense_outline(a)).min(), a.sdf(_dense_outline(b)).min()))
     return min(gaps)
 
 
