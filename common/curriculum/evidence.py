@@ -88,12 +88,11 @@ def gather_evidence(runner: Runner, state: dict) -> dict[str, Any]:
         resume = (directory / "state.json").exists()
         Runner(arm, directory, resume=resume, device=runner.device, progress=False).run()
         runs["scratch" if name.startswith("scratch") else "transfer"].append((arm.seed, directory))
-    last_dir = lambda run, arm: run / "stages" / (f"{len(config.stages) - 1}-{last.name}" if arm == "transfer"
-                                                   else f"0-{last.name}")  # noqa: E731
     per_seed: dict[str, list[dict[str, Any]]] = {"transfer": [], "scratch": []}
     for arm, members in runs.items():
         for seed, run in members:
-            final = json.loads((last_dir(run, arm) / "final_eval.json").read_text())
+            index = len(config.stages) - 1 if arm == "transfer" else 0  # a scratch run has the last stage alone
+            final = json.loads((run / "stages" / f"{index}-{last.name}" / "final_eval.json").read_text())
             curve = _curve(run, last.name)
             row = {"seed": seed, "run": str(run.relative_to(out)) if run != out else ".",
                    "test_success": final["success_rate"], "steps_to_90": steps_to(curve), "curve": curve,
