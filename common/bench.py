@@ -21,7 +21,7 @@ from common.actions import ActionMapping
 from common.generators import SUITES
 from common.occupancy import OccupancyGrid, scenario_grid
 from common.planners import RRT, AStar, Planner, path_length
-from common.scenario import Scenario
+from common.scenario import RobotProfile, Scenario
 
 
 def bench_scenario() -> Scenario:
@@ -29,14 +29,15 @@ def bench_scenario() -> Scenario:
     return next(SUITES["warehouse"].scenarios(count=1))
 
 
-def flatland_steps_per_s(scenario: Scenario, steps: int = 20_000, seed: int = 0) -> float:
-    """Steps per second of ``gymnasium.make("flatland/Nav-v0")`` (lidar43) under random actions,
-    resetting whenever an episode ends (random driving crashes often, so resets are part of it)."""
+def flatland_steps_per_s(world: Scenario | str | Path, steps: int = 20_000, seed: int = 0) -> float:
+    """Steps per second of ``gymnasium.make("flatland/Nav-v0", world=world)`` (lidar43) under random
+    actions, resetting whenever an episode ends (random driving crashes often, so resets are part of
+    it; with a generator kind as ``world`` every reset draws a new scenario)."""
     import gymnasium as gym
 
     import flatland  # noqa: F401  (registers the env)
 
-    env = gym.make("flatland/Nav-v0", world=scenario, observation="lidar43")
+    env = gym.make("flatland/Nav-v0", world=world if isinstance(world, Scenario) else str(world), observation="lidar43")
     actions = np.random.default_rng(seed).uniform(-1.0, 1.0, (steps, 2)).astype(np.float32)
     env.reset(seed=seed)
     for action in actions[:200]:  # warm-up: numba kernels compiled or loaded from cache
@@ -53,9 +54,8 @@ def flatland_steps_per_s(scenario: Scenario, steps: int = 20_000, seed: int = 0)
     return steps / elapsed
 
 
-def irsim_steps_per_s(scenario: Scenario, steps: int = 2_000, seed: int = 0) -> float | None:
-    """IR-SIM's steps per second on the same world (headless, same lidar, random actions scaled to
-    the same velocity box, reset on collision or arrival as the env does); None without IR-SIM."""
+def _import_irsim():
+    """IR-SIM, or None where it is not installed."""
     os.environ.setdefault("MPLBACKEND", "Agg")
     try:
         # IR-SIM prints its GUI-backend probing to stdout on import; keep stdout for our JSON.
@@ -63,14 +63,27 @@ def irsim_steps_per_s(scenario: Scenario, steps: int = 2_000, seed: int = 0) -> 
             import irsim
     except ImportError:
         return None
+    return irsim
+
+
+def irsim_steps_per_s(world: Scenario | Path, robot: RobotProfile | None = None, steps: int = 2_000,
+                      seed: int = 0) -> float | None:
+    """IR-SIM's steps per second on the same world (a scenario, exported, or an IR-SIM world file;
+    headless, same lidar), under the random actions flatland gets mapped to the same velocities,
+    reset on collision or arrival as the env does; None without IR-SIM."""
+    irsim = _import_irsim()
+    if irsim is None:
+        return None
     from common.irsim_export import scenario_to_irsim
 
-    mapping = ActionMapping(scenario.robot)  # the env's default mapping: the same commands flatland gets
+    mapping = ActionMapping(robot or world.robot)  # the env's default mapping: the same commands flatland gets
     actions = np.random.default_rng(seed).uniform(-1.0, 1.0, (steps, 2))
     commands = np.array([mapping.to_velocity(action) for action in actions])
     with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "bench_world.yaml"
-        path.write_text(yaml.safe_dump(scenario_to_irsim(scenario), sort_keys=False))
+        path = world
+        if isinstance(world, Scenario):
+            path = Path(tmp) / "bench_world.yaml"
+            path.write_text(yaml.safe_dump(scenario_to_irsim(world), sort_keys=False))
         env = irsim.make(str(path), headless=True, log_level="ERROR", seed=seed)
         for command in commands[:50]:
             env.step(command.reshape(2, 1))
@@ -84,6 +97,55 @@ def irsim_steps_per_s(scenario: Scenario, steps: int = 2_000, seed: int = 0) -> 
         elapsed = time.perf_counter() - start
         env.end(0)
     return steps / elapsed
+
+
+CIRCLE_WORLD = {
+    "world": {"width": 10, "height": 10, "step_time": 0.1},
+    "robot": {"kinematics": {"name": "diff"}, "shape": {"name": "circle", "radius": 0.2}, "state": [1, 1, 0],
+              "goal": [9, 9, 0], "vel_min": [0, -1], "vel_max": [1, 1],
+              "sensors": [{"name": "lidar2d", "range_max": 5, "angle_range": 6.283185307179586, "number": 36}]},
+    "obstacle": [{"number": 31, "distribution": {"name": "random", "range_low": [2, 2, 0], "range_high": [8, 8, 0],
+                                                 "min_distance": 0.6},
+                  "shape": {"name": "circle", "radius": 0.2}}],
+}
+"""IR-SIM's typical world: 31 random circles of 0.2 m and a 36-beam 360° lidar (as its examples)."""
+
+
+def irsim_circle_world_figures(steps: int) -> dict[str, Any]:
+    """Flatland against IR-SIM on an IR-SIM world file of circles, both resetting as episodes end."""
+    from common.world_file import WorldFile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "circles.yaml"
+        path.write_text(yaml.safe_dump(CIRCLE_WORLD))
+        flat = flatland_steps_per_s(path, steps)
+        theirs = irsim_steps_per_s(path, robot=WorldFile(path).initial.robot, steps=max(500, steps // 10))
+    return {"circles_flatland_steps_per_s": round(flat, 1),
+            "circles_irsim_steps_per_s": None if theirs is None else round(theirs, 1),
+            "circles_flatland_vs_irsim": None if theirs is None else round(flat / theirs, 1)}
+
+
+def ppo_steps_per_s(kind: str, steps: int = 16_384, seed: int = 0) -> float:
+    """PPO's training throughput (env steps per second, learner included) with the main job's
+    settings (8 envs, n_steps 256, batch 256, 5 epochs, lidar43_log) on a generator kind."""
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from flatland.env import NavEnv
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        env = make_vec_env(NavEnv, n_envs=8, seed=seed, env_kwargs={"world": kind, "observation": "lidar43_log",
+                                                                  "max_steps": 300})
+        model = PPO("MlpPolicy", env, n_steps=256, batch_size=256, n_epochs=5, seed=seed, device="cpu")
+        model.learn(2048)  # warm-up: the first rollout also compiles numba kernels
+        start = time.perf_counter()
+        model.learn(steps, reset_num_timesteps=False)
+        return steps / (time.perf_counter() - start)
+    finally:
+        torch.set_num_threads(threads)
 
 
 def planner_pairs(scenario: Scenario, grid: OccupancyGrid, count: int = 20, seed: int = 0,
@@ -238,7 +300,7 @@ def run_benchmarks(steps: int = 20_000) -> dict[str, Any]:
     """All figures of this milestone, as one flat mapping."""
     scenario = bench_scenario()
     flat = flatland_steps_per_s(scenario, steps)
-    irsim = irsim_steps_per_s(scenario, max(500, steps // 10))
+    irsim = irsim_steps_per_s(scenario, steps=max(500, steps // 10))
     scenario3d = physics3d_bench_scenario()
     steps3d = max(500, steps // 10)
     env3d, resets = physics3d_steps_per_s(scenario3d, steps3d)
@@ -256,4 +318,13 @@ def run_benchmarks(steps: int = 20_000) -> dict[str, Any]:
         "physics3d_vs_bare": round(env3d / bare3d, 3),
         "camera_fps": round(camera_fps(scenario3d), 1),
         **reset_ms(),
+        **irsim_circle_world_figures(steps),
+        "warehouse_env_steps_per_s": round(flatland_steps_per_s("warehouse", max(500, steps // 4)), 1),
+        **_ppo_figures(),
     }
+
+
+def _ppo_figures() -> dict[str, float]:
+    sparse, cluttered = ppo_steps_per_s("sparse"), ppo_steps_per_s("cluttered")
+    return {"ppo_steps_per_s_sparse": round(sparse, 1), "ppo_steps_per_s_cluttered": round(cluttered, 1),
+            "ppo_cluttered_vs_sparse": round(cluttered / sparse, 3)}

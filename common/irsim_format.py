@@ -9,9 +9,12 @@ Mapping, and where it deliberately differs from IR-SIM:
 * The first robot (after expanding ``number``) is the controlled one and must use
   ``kinematics: {name: diff}``. Further robots, and every obstacle, become static obstacles at
   their initial state: behaviours, kinematics and initial velocities of other objects are ignored.
-* IR-SIM builds circles as 64-gons (a buffered point), and so do we for obstacles, vertex for
-  vertex, so lidar ranges match to rounding. The controlled robot stays a true circle: its contact
-  distance differs from IR-SIM's 64-gon by at most ``r * (1 - cos(pi / 64))``, about 0.12 % of r.
+* IR-SIM builds circles as 64-gons (a buffered point); here they stay circles, read by an exact
+  ray-circle test and collided with as circles, which is what keeps IR-SIM's typical worlds of
+  many small circles fast. A 64-gon's edges lie inside its circle by at most r (1 - cos(pi / 64)),
+  0.12 % of r (0.6 mm for r = 0.5 m), so ranges head-on and contact distances differ by that
+  much; a beam grazing the rim differs more (tests/test_irsim_parity.py bounds both). Polygons,
+  rectangles and lines match IR-SIM to rounding.
 * Without a lidar2d sensor the scenario still gets a lidar with IR-SIM's lidar2d defaults,
   because every project scenario carries one.
 * Random placement (``distribution: random``) and random shapes use ``np.random.default_rng(seed)``
@@ -38,6 +41,7 @@ from common.polygons import is_simple_polygon
 from common.scenario import (
     MAX_OBSTACLES,
     BoxObstacle,
+    CircleObstacle,
     LidarSpec,
     PolygonObstacle,
     RobotProfile,
@@ -86,7 +90,6 @@ MAX_VERTICES = 1000  # per polygon
 MAX_TOTAL_VERTICES = 20_000  # across the file (simplicity checks cost the square of a polygon's vertices)
 MAX_PLACEMENT_CHECKS = 10_000_000  # candidate-to-placed distance checks of random placement, across the file
 MAX_BEAMS = 4096
-CIRCLE_SEGMENTS = 64  # shapely's Point.buffer default: 16 segments per quarter circle
 _MARGIN = 0.5  # IR-SIM keeps default random and circle placements this far inside the world
 
 
@@ -499,12 +502,6 @@ def _transform(points: np.ndarray, state: tuple[float, float, float]) -> np.ndar
     return np.column_stack((points[:, 0] * c - points[:, 1] * s + x, points[:, 0] * s + points[:, 1] * c + y))
 
 
-def circle_vertices(cx: float, cy: float, radius: float) -> np.ndarray:
-    """The 64-gon shapely's ``Point(cx, cy).buffer(radius)`` gives: from (cx + r, cy), clockwise."""
-    angles = -2.0 * np.pi * np.arange(CIRCLE_SEGMENTS) / CIRCLE_SEGMENTS
-    return np.column_stack((cx + radius * np.cos(angles), cy + radius * np.sin(angles)))
-
-
 def _polygon_ring(vertices: np.ndarray, path: str) -> np.ndarray:
     """A polygon's ring without a repeated closing vertex; an invalid one becomes its bounding box,
     as IR-SIM replaces it by the envelope of its repaired form."""
@@ -521,8 +518,8 @@ def _polygon_ring(vertices: np.ndarray, path: str) -> np.ndarray:
 def _obstacle(shape: _Shape, state: tuple[float, float, float], unobstructed: bool, shape_path: str) -> Any:
     """A shape placed at a state as a project obstacle."""
     if shape.kind == "circle":
-        ring = circle_vertices(shape.points[0, 0], shape.points[0, 1], shape.radius)
-        return PolygonObstacle(vertices=[tuple(p) for p in _transform(ring, state)], unobstructed=unobstructed)
+        x, y = _transform(shape.points, state)[0]
+        return CircleObstacle(x=x, y=y, radius=shape.radius, unobstructed=unobstructed)
     if shape.kind == "rectangle":
         x, y = _transform(shape.points, state)[0]
         return BoxObstacle(x=x, y=y, length=shape.length, width=shape.width, yaw=state[2], unobstructed=unobstructed)

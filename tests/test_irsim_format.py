@@ -13,9 +13,9 @@ from tests.conftest import optional
 import yaml
 
 from common.errors import ConfigError
-from common.irsim_format import circle_vertices, has_random_placement, parse_irsim
+from common.irsim_format import has_random_placement, parse_irsim
 from common.polygons import is_simple_polygon
-from common.scenario import BoxObstacle, PolygonObstacle, SegmentObstacle
+from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, SegmentObstacle
 from common.yaml_io import read_yaml_mapping
 from common.world_file import WorldFile, read_world_file
 
@@ -131,8 +131,7 @@ robot:
   state: [[1, 1, 0], [3, 3, 0]]
 """)
     assert scenario.start == (1.0, 1.0, 0.0)
-    centres = [np.mean(o.vertices, axis=0) for o in scenario.obstacles]
-    np.testing.assert_allclose(centres, [[3, 3], [3, 3]], atol=1e-12)  # padded with the last state
+    assert [(o.x, o.y) for o in scenario.obstacles] == [(3, 3), (3, 3)]  # padded with the last state
 
 
 @pytest.mark.parametrize("spelling", ["name: lidar2d, ", "type: lidar2d, ", ""])
@@ -165,19 +164,15 @@ def test_single_beam_points_straight_ahead(tmp_path):
 # -- obstacles -----------------------------------------------------------------------------------
 
 
-def test_circle_obstacle_is_irsims_64_gon(tmp_path):
-    shapely = optional("shapely")
+def test_a_circle_obstacle_stays_a_circle_where_irsim_places_it(tmp_path):
     (obstacle,) = load(tmp_path, ROBOT + """\
 obstacle:
   - shape: {name: circle, radius: 0.5, center: [0.2, 0.1]}
     state: [3, 4, 0.7]
 """).obstacles
-    assert isinstance(obstacle, PolygonObstacle) and len(obstacle.vertices) == 64
-    body = shapely.geometry.Point(0.2, 0.1).buffer(0.5)
-    c, s = math.cos(0.7), math.sin(0.7)
-    expected = [(x * c - y * s + 3, x * s + y * c + 4) for x, y in body.exterior.coords[:-1]]
-    np.testing.assert_allclose(obstacle.vertices, expected, atol=1e-12)
-    np.testing.assert_allclose(circle_vertices(0, 0, 1), np.asarray(shapely.geometry.Point(0, 0).buffer(1).exterior.coords)[:-1], atol=1e-15)
+    c, s = math.cos(0.7), math.sin(0.7)  # the body-frame centre turned by the state's yaw, then moved
+    assert isinstance(obstacle, CircleObstacle) and obstacle.radius == 0.5
+    assert (obstacle.x, obstacle.y) == pytest.approx((0.2 * c - 0.1 * s + 3, 0.2 * s + 0.1 * c + 4), abs=1e-12)
 
 
 def test_obstacle_shapes_and_defaults(tmp_path):
@@ -192,12 +187,12 @@ obstacle:
     state: [7, 1, 1.5707963267948966]
   - {}
 """).obstacles
-    assert np.max(np.hypot(*(np.asarray(circle.vertices) - [5, 5]).T)) == pytest.approx(0.2)
+    assert (circle.x, circle.y, circle.radius) == (5, 5, 0.2)
     assert isinstance(box, BoxObstacle) and (box.x, box.y, box.length, box.width, box.yaw) == (3, 7, 2, 0.5, 0.5)
     np.testing.assert_allclose(polygon.vertices, [[1, 1], [2, 1], [1, 2]])  # default state [1, 1, 0]
     assert isinstance(line, SegmentObstacle)
     np.testing.assert_allclose(line.points, [[7, 1], [4, 1]], atol=1e-12)
-    assert np.max(np.hypot(*(np.asarray(default.vertices) - [1, 1]).T)) == pytest.approx(1.0)  # no shape: radius 1
+    assert (default.x, default.y, default.radius) == (1, 1, 1.0)  # no shape: IR-SIM's circle of radius 1
 
 
 def test_unobstructed_flag(tmp_path):
@@ -267,8 +262,7 @@ def test_circle_distribution(tmp_path):
     scenario = load(tmp_path, ROBOT + "  number: 4\n  shape: {name: circle}\n  distribution: {name: circle, radius: 2, center: [5, 5]}\n")
     assert scenario.start == pytest.approx((7.0, 5.0, -math.pi))
     assert scenario.goal == pytest.approx((3.0, 5.0))
-    centres = [np.mean(o.vertices, axis=0) for o in scenario.obstacles]
-    np.testing.assert_allclose(centres, [[5, 7], [3, 5], [5, 3]], atol=1e-12)
+    np.testing.assert_allclose([(o.x, o.y) for o in scenario.obstacles], [[5, 7], [3, 5], [5, 3]], atol=1e-12)
 
 
 def test_random_shapes(tmp_path):
@@ -278,9 +272,8 @@ obstacle:
   - {shape: {name: polygon, random_shape: true, avg_radius_range: [0.5, 0.6]}, state: [5, 2, 0]}
 """
     a, b, polygon = load(tmp_path, text, seed=1).obstacles
-    for obstacle, centre in ((a, [2, 2]), (b, [5, 5])):
-        radius = np.max(np.hypot(*(np.asarray(obstacle.vertices) - centre).T))
-        assert 0.3 <= radius <= 0.4
+    for obstacle, centre in ((a, (2, 2)), (b, (5, 5))):
+        assert (obstacle.x, obstacle.y) == centre and 0.3 <= obstacle.radius <= 0.4
     assert 4 <= len(polygon.vertices) < 10
     assert load(tmp_path, text, seed=1) == load(tmp_path, text, seed=1) != load(tmp_path, text, seed=2)
 
@@ -464,6 +457,5 @@ def test_round_trip_through_irsim_export():
     np.testing.assert_allclose(exported.beam_angles(), full.lidar.beam_angles(), atol=1e-12)
     assert back.world.walls is False and len(back.obstacles) == 5  # the walls come back as a linestring
     circle, box, polygon, segment, walls = back.obstacles
-    np.testing.assert_allclose(np.hypot(*(np.asarray(circle.vertices) - [5, 5]).T), 0.4)
-    assert (box, polygon, segment) == tuple(scenario.obstacles[1:])
+    assert (circle, box, polygon, segment) == tuple(scenario.obstacles)
     assert isinstance(walls, SegmentObstacle) and len(walls.points) == 5

@@ -2,7 +2,8 @@
 
 Each test writes an IR-SIM world YAML, runs the same actions through ``irsim.make`` (headless) and
 ``flatland.load_world``, and compares every step: poses to 1e-9, lidar ranges to 1e-6, and the
-collision flag.
+collision flag. IR-SIM draws circles as 64-gons where flatland keeps them circles, so in worlds
+with circles poses agree to 1 mm and, at every step, at least 95 % of the beams to 2 cm.
 """
 
 from __future__ import annotations
@@ -80,10 +81,16 @@ def run_both(tmp_path: Path, text: str, actions, seed: int = 0):
     return ours, theirs
 
 
-def assert_same(ours, theirs) -> None:
+def assert_same(ours, theirs, circles: bool = True) -> None:
+    """Every step alike: exactly, or where the world has circles, within the 64-gon's difference."""
     for k, (reading, (pose, ranges, collided)) in enumerate(zip(ours, theirs)):
-        np.testing.assert_allclose(reading.pose, pose, rtol=0, atol=1e-9, err_msg=f"pose after step {k}")
-        np.testing.assert_allclose(reading.lidar, ranges, rtol=0, atol=1e-6, err_msg=f"ranges after step {k}")
+        if circles:
+            np.testing.assert_allclose(reading.pose, pose, rtol=0, atol=1e-3, err_msg=f"pose after step {k}")
+            close = np.abs(reading.lidar - ranges) <= 0.02
+            assert close.mean() >= 0.95, f"ranges after step {k}: only {close.mean():.0%} of beams within 2 cm"
+        else:
+            np.testing.assert_allclose(reading.pose, pose, rtol=0, atol=1e-9, err_msg=f"pose after step {k}")
+            np.testing.assert_allclose(reading.lidar, ranges, rtol=0, atol=1e-6, err_msg=f"ranges after step {k}")
         if k > 0:  # IR-SIM checks collisions only when stepping
             assert reading.collided == collided, f"collision flag after step {k}"
 
@@ -154,7 +161,7 @@ def test_acceleration_limits(tmp_path):
 def test_world_is_unbounded_and_offset_is_ignored_for_physics(tmp_path):
     text = world_yaml(state="9, 9, 0.4", obstacles="").replace("width: 10,", "width: 10, offset: [-1, -1],")
     ours, theirs = run_both(tmp_path, text, [(1.0, 0.0)] * 30)
-    assert_same(ours, theirs)
+    assert_same(ours, theirs, circles=False)
     assert ours[-1].pose.x > 10 and not ours[-1].collided
 
 
@@ -195,13 +202,13 @@ def test_start_overlapping_an_obstacle_may_drive_out(tmp_path):
     # IR-SIM runs such a file; flatland runs it the same way, with a warning that the start is tight.
     with pytest.warns(ScenarioWarning, match=r"start: \(2.35, 5\) is 0.15 m from an obstacle"):
         ours, theirs = run_both(tmp_path, world_yaml(state="2.35, 5, 3.14159", obstacles=obstacles), [(1.0, 0.0)] * 5)
-    assert_same(ours, theirs)
+    assert_same(ours, theirs, circles=False)
 
 
-def test_the_one_deliberate_difference_a_fast_robot_cannot_jump_a_thin_wall(tmp_path):
+def test_a_deliberate_difference_a_fast_robot_cannot_jump_a_thin_wall(tmp_path):
     """IR-SIM checks only where a step ends, so at 0.5 m per step its robot passes through a thin
     wall (2.75 -> 3.25: neither end pose touches x = 3). Flatland sweeps every move and stops the
-    robot where it first touches the wall; this is the one place it differs from IR-SIM on purpose."""
+    robot where it first touches the wall (the other deliberate difference: circles stay circles)."""
     obstacles = "obstacle:\n  - shape: {name: linestring, vertices: [[0, -1], [0, 1]]}\n    state: [3, 5, 0]\n"
     text = world_yaml(state="1.25, 5, 0", extra="    vel_max: [5, 1]", obstacles=obstacles)
     ours, theirs = run_both(tmp_path, text, [(5.0, 0.0)] * 6)
