@@ -125,9 +125,11 @@ def irsim_circle_world_figures(steps: int) -> dict[str, Any]:
             "circles_flatland_vs_irsim": None if theirs is None else round(flat / theirs, 1)}
 
 
-def ppo_steps_per_s(kind: str, steps: int = 16_384, seed: int = 0) -> float:
+def ppo_steps_per_s(kind: str, steps: int = 16_384, seed: int = 0) -> tuple[float, float]:
     """PPO's training throughput (env steps per second, learner included) with the main job's
-    settings (8 envs, n_steps 256, batch 256, 5 epochs, lidar43_log) on a generator kind."""
+    settings (8 envs, n_steps 256, batch 256, 5 epochs, lidar43_log) on a generator kind, and the
+    share of that time spent collecting rollouts (the envs and the policy's forward passes)
+    rather than in gradient updates."""
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_util import make_vec_env
@@ -141,9 +143,12 @@ def ppo_steps_per_s(kind: str, steps: int = 16_384, seed: int = 0) -> float:
                                                                   "max_steps": 300})
         model = PPO("MlpPolicy", env, n_steps=256, batch_size=256, n_epochs=5, seed=seed, device="cpu")
         model.learn(2048)  # warm-up: the first rollout also compiles numba kernels
+        spent = {"collect_rollouts": 0.0, "train": 0.0}
+        for name in spent:
+            setattr(model, name, _timed(getattr(model, name), spent, name))
         start = time.perf_counter()
         model.learn(steps, reset_num_timesteps=False)
-        return steps / (time.perf_counter() - start)
+        return steps / (time.perf_counter() - start), spent["collect_rollouts"] / sum(spent.values())
     finally:
         torch.set_num_threads(threads)
 
@@ -320,11 +325,23 @@ def run_benchmarks(steps: int = 20_000) -> dict[str, Any]:
         **reset_ms(),
         **irsim_circle_world_figures(steps),
         "warehouse_env_steps_per_s": round(flatland_steps_per_s("warehouse", max(500, steps // 4)), 1),
-        **_ppo_figures(),
+        **_ppo_figures(max(2048, steps)),
     }
 
 
-def _ppo_figures() -> dict[str, float]:
-    sparse, cluttered = ppo_steps_per_s("sparse"), ppo_steps_per_s("cluttered")
+def _timed(method, spent: dict[str, float], name: str):
+    def wrapper(*args, **kwargs):
+        began = time.perf_counter()
+        try:
+            return method(*args, **kwargs)
+        finally:
+            spent[name] += time.perf_counter() - began
+
+    return wrapper
+
+
+def _ppo_figures(steps: int) -> dict[str, float]:
+    (sparse, sparse_share), (cluttered, cluttered_share) = ppo_steps_per_s("sparse", steps), ppo_steps_per_s("cluttered", steps)
     return {"ppo_steps_per_s_sparse": round(sparse, 1), "ppo_steps_per_s_cluttered": round(cluttered, 1),
-            "ppo_cluttered_vs_sparse": round(cluttered / sparse, 3)}
+            "ppo_cluttered_vs_sparse": round(cluttered / sparse, 3),
+            "ppo_rollout_share_sparse": round(sparse_share, 3), "ppo_rollout_share_cluttered": round(cluttered_share, 3)}

@@ -61,6 +61,11 @@ def test_bench_json_has_the_agreed_keys(capsys):
     assert results["obstacles"] == 31 and results["lidar_beams"] == 36
     assert results["flatland_steps_per_s"] > 0
     assert "irsim_steps_per_s" in results
+    for kind in ("open", "sparse", "cluttered", "warehouse", "trap", "irsim_random"):
+        assert results[f"reset_ms_{kind}"] > 0
+    assert results["circles_flatland_steps_per_s"] > 0 and "circles_flatland_vs_irsim" in results
+    assert results["warehouse_env_steps_per_s"] > 0 and results["ppo_steps_per_s_cluttered"] > 0
+    assert 0 < results["ppo_rollout_share_sparse"] < 1
 
 
 @pytest.mark.parametrize("argv, expected", [

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import socket
 import time
 from pathlib import Path
@@ -185,6 +186,8 @@ def run_sweep(source: str | Path, out: Path, seeds: int = 1, space: str | Path |
     if address:
         check_address(address)
     load_curriculum(source)  # one-line errors before any trial starts
+    # Tune's newer console output ignores verbose=0; the runs' own reports are what users read.
+    os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")
     import ray
     from ray import tune
 
