@@ -85,11 +85,11 @@ def _eval(args: argparse.Namespace) -> int:
     from common.report import markdown_table
 
     scenarios = _scenarios(args)
-    # Each policy runs episodes as long as, and under the conditions, it trained with, unless
-    # --max-steps and --env-kwargs say otherwise.
+    # Each policy runs episodes as long as, under the conditions and judged within the goal radius
+    # it trained with, unless --max-steps, --env-kwargs and --goal-threshold say otherwise.
     summaries = [summary for agent in _policies(args.policy)
-                 for summary in evaluate([agent], scenarios, args.world, seed=args.seed, max_steps=args.max_steps,
-                                         conditions=_conditions(args, [agent]))]
+                 for summary in evaluate([agent], _judged(args, scenarios, [agent]), args.world, seed=args.seed,
+                                         max_steps=args.max_steps, conditions=_conditions(args, [agent]))]
     if args.json:
         print(json.dumps(summaries[0].to_json() if len(summaries) == 1 else {s.agent: s.to_json() for s in summaries}))
     else:
@@ -134,9 +134,21 @@ def _scenarios(args: argparse.Namespace, count: int | None = None):
         scenarios = [file.scenario(args.seed + i) for i in range(count)]
     else:
         scenarios = list(get_suite(args.suite).scenarios(count=count, seed=args.seed))
-    if args.goal_threshold is not None:
-        scenarios = [s.model_copy(update={"goal_threshold": args.goal_threshold}) for s in scenarios]
     return scenarios
+
+
+def _judged(args: argparse.Namespace, scenarios, agents):
+    """The scenarios judged within ``--goal-threshold``, else within the goal radius the policies
+    among ``agents`` trained with (which must agree), else each scenario's own."""
+    from common.nav_env import judged_radius, with_radius
+
+    if args.goal_threshold is not None:
+        return with_radius(scenarios, args.goal_threshold)
+    radii = {judged_radius(agent.env_kwargs) for agent in agents if hasattr(agent, "env_kwargs")}
+    if len(radii) > 1:
+        raise ConfigError(None, "--policy", f"these policies trained for different goal radii ({sorted(map(str, radii))}); "
+                          "give --goal-threshold to judge them alike")
+    return with_radius(scenarios, radii.pop() if radii else None)
 
 
 def _controllers(names: str | None, flag: str):
@@ -168,8 +180,8 @@ def _compare(args: argparse.Namespace) -> int:
     from common.evaluation import evaluate
     from common.report import bar_chart, markdown_table, write_csv
 
-    scenarios = _scenarios(args)
     agents = _controllers(args.controllers, "--controllers") + _policies(args.policy)
+    scenarios = _judged(args, _scenarios(args), agents)
     source = Path(args.scenario_file).stem if args.scenario_file else args.suite
     out = Path(args.out) if args.out else Path("runs") / "compare" / f"{args.world}-{source}"
     out.mkdir(parents=True, exist_ok=True)
@@ -230,10 +242,10 @@ def _record(agent, scenario, args: argparse.Namespace, gif: Path, every: int = 1
 def _render(args: argparse.Namespace) -> int:
     from flatland.render import plot_odometry_drift
 
-    scenario = _scenarios(args, count=args.index + 1)[args.index]
+    agent = _agent(args.agent)
+    scenario = _judged(args, _scenarios(args, count=args.index + 1), [agent])[args.index]
     if args.encoder_noise is not None:
         scenario = scenario.model_copy(update={"robot": scenario.robot.model_copy(update={"encoder_noise": args.encoder_noise})})
-    agent = _agent(args.agent)
     gif, episode, true_path, estimate = _record(agent, scenario, args, Path(args.out), args.every)
     print(f"{gif}: {agent.name} on {scenario.name}: {episode.outcome} after {episode.steps} steps, "
           f"{episode.path_length:.2f} m")
@@ -266,8 +278,8 @@ def _add_scenario_source(parser: argparse.ArgumentParser, episodes: int | None) 
                         help="shifts the suite's base seed and the noise seeds (0 to 2^32 - 1)")
     parser.add_argument("--max-steps", type=_whole(1, 1_000_000), default=None,
                         help="steps before a timeout (default: a policy's own episode length, else 500)")
-    parser.add_argument("--goal-threshold", type=_radius, metavar="M",
-                        help="judge arrival within M metres instead of each scenario's goal radius")
+    parser.add_argument("--goal-threshold", type=_metres, metavar="M",
+                        help="judge arrival within M metres (default: the radius a policy trained for, else each scenario's)")
     parser.add_argument("--env-kwargs", type=_key_value, nargs="+", metavar="KEY:VALUE",
                         help="conditions (e.g. lidar_noise:0.02 motor_scale:[0.8,1.2] robot:physics3d), "
                              "over a policy's own (values read as YAML)")
@@ -302,7 +314,7 @@ def _key_value(text: str) -> tuple[str, object]:
         raise argparse.ArgumentTypeError(f"{key}: {value!r} is not a YAML value") from None
 
 
-def _radius(text: str) -> float:
+def _metres(text: str) -> float:
     """An argparse type: a goal radius, a finite number of metres in (0, 1000]."""
     try:
         value = float(text)

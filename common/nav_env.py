@@ -163,6 +163,18 @@ class NavigationEnv(gym.Env):
         return self._readings
 
 
+def judged_radius(env_kwargs: Mapping[str, Any]) -> float | None:
+    """The goal radius a policy trained with ``env_kwargs`` is judged by: its ``goal_threshold``,
+    the smallest of a range (it trained to arrive that close), or None (each scenario's own)."""
+    limits = threshold_range(env_kwargs.get("goal_threshold"))
+    return None if limits is None else limits[0]
+
+
+def with_radius(scenarios: Sequence[Scenario], radius: float | None) -> list[Scenario]:
+    """The scenarios judged at ``radius`` (unchanged for None)."""
+    return list(scenarios) if radius is None else [s.model_copy(update={"goal_threshold": radius}) for s in scenarios]
+
+
 def threshold_range(value: float | Sequence[float] | None) -> tuple[float, float] | None:
     """``goal_threshold`` as (low, high): None keeps each scenario's, a number fixes it, a pair is drawn
     from uniformly per episode (so a policy learns to arrive whatever radius it is judged by)."""

@@ -214,3 +214,27 @@ def test_a_policys_conditions_are_evaluated_by_default_and_the_command_line_over
     with pytest.raises(ConfigError, match="--policy: these policies trained under different conditions"):
         _conditions(build_parser().parse_args(["compare", "--policy", str(path), str(untrained_policy)]),
                     [agent, load_policy(untrained_policy)])
+
+
+def test_a_policy_is_judged_within_the_goal_radius_it_trained_for(untrained_policy, tmp_path):
+    import shutil
+
+    from common.cli import _judged, _scenarios, build_parser
+    from common.controllers import make_controller
+    from common.curriculum.policy import load_policy
+    from common.curriculum.policy_file import update_manifest
+
+    path = tmp_path / "precise.zip"
+    shutil.copy(untrained_policy, path)
+    update_manifest(path, {"env_kwargs": {"goal_threshold": [0.1, 0.5]}})
+    precise, plain = load_policy(path), load_policy(untrained_policy)
+
+    def radii(*flags: str, agents=(precise,)):
+        args = build_parser().parse_args(["compare", "--episodes", "3", *flags])
+        return {s.goal_threshold for s in _judged(args, _scenarios(args), list(agents))}
+
+    assert radii() == {0.1}  # the smallest radius it trained for
+    assert radii("--goal-threshold", "0.4") == {0.4}
+    assert radii(agents=(plain, make_controller("pid_blend"))) == {0.3}  # the suite's own
+    with pytest.raises(ConfigError, match="trained for different goal radii"):
+        radii(agents=(precise, plain))

@@ -344,3 +344,11 @@ def test_a_transfer_curriculum_writes_its_evidence(tmp_path, capsys):
             assert names and all("-eval-" in name for name in names), names
     # The 3D stage evaluated the URDF robot under physics3d's conditions, as it trained.
     assert read_manifest(out / "stages/1-three/policy.zip")["robot"]["v_max"] == 0.5
+
+
+def test_a_stage_is_evaluated_within_its_own_goal_radius():
+    from common.curriculum.runner import stage_scenarios
+
+    config = curriculum_from_mapping(_with({}, {"env_kwargs": {"goal_threshold": [0.12, 0.5]}}), "c.yaml")
+    assert {s.goal_threshold for s in stage_scenarios(config.stages[0], 4, 0)} == {0.12}
+    assert {s.goal_threshold for s in stage_scenarios(config.stages[1], 4, 0)} == {0.3}  # the suite's own

@@ -47,6 +47,7 @@ from common.curriculum.schema import CurriculumConfig, StageSpec
 from common.errors import ConfigError
 from common.evaluation import Summary, evaluate
 from common.generators import get_suite
+from common.nav_env import judged_radius, with_radius
 from common.observations import DEFAULT_GOAL_DISTANCE_SCALE
 from common.report import write_csv
 from common.scenario import RobotProfile, Scenario
@@ -341,9 +342,8 @@ class Runner:
         """Success and SPL of the current model on the stage's eval suite (a held-out draw)."""
         agent = PolicyAgent(model, stage.observation, DEFAULT_GOAL_DISTANCE_SCALE, normalizer, name=stage.name,
                             action_mapping=stage.action_mapping, max_steps=stage.max_steps)
-        scenarios = get_suite(stage.eval.suite).scenarios(count=episodes, seed=seed_shift)
-        (summary,) = evaluate([agent], scenarios, stage.world, seed=seed_shift, max_steps=stage.max_steps,
-                              conditions=conditions_of(stage.env_kwargs))
+        (summary,) = evaluate([agent], stage_scenarios(stage, episodes, seed_shift), stage.world, seed=seed_shift,
+                              max_steps=stage.max_steps, conditions=conditions_of(stage.env_kwargs))
         return summary
 
     def evaluate_policy(self, stage: StageSpec, policy: Path, test: bool = True) -> Summary:
@@ -354,9 +354,8 @@ class Runner:
         agent = load_policy(policy, device=self.device, name=stage.name)
         episodes = (stage.eval.final_episodes or stage.eval.episodes) if test else stage.eval.episodes
         first = TEST_SEED_SHIFT if test else 0
-        scenarios = get_suite(stage.eval.suite).scenarios(count=episodes, seed=first)
-        (summary,) = evaluate([agent], scenarios, stage.world, seed=first, max_steps=stage.max_steps,
-                              conditions=conditions_of(stage.env_kwargs))
+        (summary,) = evaluate([agent], stage_scenarios(stage, episodes, first), stage.world, seed=first,
+                              max_steps=stage.max_steps, conditions=conditions_of(stage.env_kwargs))
         return summary
 
     def final_evaluation(self, stage: StageSpec, policy: Path) -> Summary:
@@ -367,6 +366,12 @@ class Runner:
         atomic_write(policy.parent / "final_episodes.csv", lambda tmp: write_csv([summary], tmp))
         update_manifest(policy, {"final_eval": figures})
         return summary
+
+
+def stage_scenarios(stage: StageSpec, count: int, first: int) -> list[Scenario]:
+    """A draw of the stage's eval suite, judged as the stage trains: within its own goal radius if
+    it sets one (a stage that trains to arrive within 0.1 m is measured on arriving within 0.1 m)."""
+    return with_radius(get_suite(stage.eval.suite).scenarios(count=count, seed=first), judged_radius(stage.env_kwargs))
 
 
 def training_robot(stage: StageSpec) -> RobotProfile:
