@@ -27,12 +27,19 @@ def test_readme_starts_with_the_main_job_and_the_tests_and_ci_runs_the_second():
     assert "rm -rf .venv" in ci, "CI must install into a new virtual environment every run"
 
 
-def _declared() -> set[str]:
+def _names(requirements: list[str]) -> set[str]:
+    return {re.split(r"[<>=!~\[; ]", requirement, maxsplit=1)[0].lower().replace("_", "-")
+            for requirement in requirements}
+
+
+def _project() -> dict:
     import tomllib
 
-    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
-    return {re.split(r"[<>=!~\[; ]", requirement, maxsplit=1)[0].lower().replace("_", "-")
-            for requirement in project["dependencies"]}
+    return tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+
+
+def _declared() -> set[str]:
+    return _names(_project()["dependencies"])
 
 
 def _third_party_imports() -> set[str]:
@@ -47,15 +54,24 @@ def _third_party_imports() -> set[str]:
     return {n for n in names if n not in sys.stdlib_module_names and n not in PACKAGES}
 
 
-# Imported only inside optional paths (the IR-SIM comparison in `curriculum bench`), under the `irsim` extra.
-OPTIONAL = {"irsim"}
+# Imported only inside optional paths, each under its extra: the IR-SIM comparison in `curriculum bench`,
+# and `curriculum sweep`.
+OPTIONAL = {"irsim": "irsim", "ray": "sweep", "optuna": "sweep"}
+
+
+def test_optional_imports_are_declared_by_their_extra():
+    extras = _project()["optional-dependencies"]
+    for module, extra in OPTIONAL.items():
+        providers = {d.lower().replace("_", "-")
+                     for d in importlib.metadata.packages_distributions().get(module, [module.replace("_", "-")])}
+        assert providers & _names(extras[extra]), f"{module} is not in the [{extra}] extra"
 
 
 def test_every_package_the_code_imports_is_a_declared_dependency():
     distributions = importlib.metadata.packages_distributions()
     declared = _declared()
     missing = {}
-    for module in _third_party_imports() - OPTIONAL:
+    for module in _third_party_imports() - set(OPTIONAL):
         providers = {d.lower().replace("_", "-") for d in distributions.get(module, [module])}
         if not providers & declared:
             missing[module] = sorted(providers)
