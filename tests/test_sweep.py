@@ -99,8 +99,11 @@ def test_a_trial_whose_process_dies_is_retried_from_its_checkpoint(tmp_path, mon
 
 @pytest.mark.slow
 def test_an_interrupted_sweep_continues_with_resume(tmp_path):
+    # Eight times the tiny budget, so the driver is still training when it is killed on a busy machine.
+    longer = tmp_path / "longer.yaml"
+    longer.write_text(TINY.read_text().replace("budget: 512", "budget: 4096").replace("every: 128", "every: 512"))
     out = tmp_path / "sweep"
-    driver = subprocess.Popen([sys.executable, "-m", "common.cli", "sweep", str(TINY), "--seeds", "2", "--out", str(out)],
+    driver = subprocess.Popen([sys.executable, "-m", "common.cli", "sweep", str(longer), "--seeds", "2", "--out", str(out)],
                               cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     deadline = time.time() + 240
     while time.time() < deadline and not list(out.glob("trials/*/eval.csv")):
@@ -111,7 +114,32 @@ def test_an_interrupted_sweep_continues_with_resume(tmp_path):
     os.killpg(driver.pid, signal.SIGKILL)  # the driver and the local Ray it started
     driver.wait()
     assert not (out / "sweep.json").exists()
-    resumed = subprocess.run([sys.executable, "-m", "common.cli", "sweep", str(TINY), "--seeds", "2", "--out", str(out),
+    before = {run.name: _eval_steps(run) for run in (out / "trials").iterdir() if (run / "eval.csv").exists()}
+    resumed = subprocess.run([sys.executable, "-m", "common.cli", "sweep", str(longer), "--seeds", "2", "--out", str(out),
                               "--resume"], cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert resumed.returncode == 0, resumed.stderr[-2000:]
     assert [t["status"] for t in _trials(out)] == ["done", "done"]
+    for name, steps in before.items():  # each run went on from where it was killed, nothing repeated
+        assert _eval_steps(out / "trials" / name) == list(range(512, 4097, 512)), name
+        assert steps == list(range(512, 512 * (len(steps) + 1), 512))
+
+
+@pytest.mark.slow
+def test_a_sweep_killed_before_tune_saved_its_state_resumes_from_the_run_directories(tmp_path):
+    from common.curriculum.runner import Runner
+    from common.curriculum.schema import load_curriculum
+    from common.curriculum.sweep import run_sweep
+
+    out = tmp_path / "sweep"
+    Runner(load_curriculum(TINY), out / "trials" / "seed0", progress=False).run()  # the trial's training, done
+    (out / "ray").mkdir()  # Tune's directory, empty: the driver died before its first save
+    trained = (out / "trials" / "seed0" / "eval.csv").read_text()
+    results = run_sweep(TINY, out, seeds=1, resume=True)
+    assert [t["status"] for t in results["trials"]] == ["done"]
+    assert (out / "trials" / "seed0" / "eval.csv").read_text() == trained  # resumed, not trained again
+    with pytest.raises(Exception, match="nothing to resume here"):
+        run_sweep(TINY, tmp_path / "never", seeds=1, resume=True)
+
+
+def _eval_steps(run: Path) -> list[int]:
+    return [int(row["timesteps"]) for row in csv.DictReader((run / "eval.csv").open())]

@@ -26,6 +26,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import shutil
 import socket
 import time
 from pathlib import Path
@@ -194,16 +195,21 @@ def run_sweep(source: str | Path, out: Path, seeds: int = 1, space: str | Path |
     curriculum = read_yaml(source)
     out = Path(out).resolve()
     experiment = out / "ray"
-    if resume and not tune.Tuner.can_restore(str(experiment)):
-        raise ConfigError(out, None, "nothing to resume here (no Ray experiment); run without --resume")
+    restore = resume and tune.Tuner.can_restore(str(experiment))
+    if resume and not restore and not (out / "trials").is_dir():
+        raise ConfigError(out, None, "nothing to resume here (no sweep ran); run without --resume")
     if not resume and experiment.exists():
         raise ConfigError(out, None, "a sweep already ran here; pass --resume to continue it or choose another --out")
+    if resume and not restore:
+        # Killed before Tune saved its first state: start Tune afresh; each trial still resumes
+        # from its own run directory, which is where the training lives.
+        shutil.rmtree(experiment, ignore_errors=True)
     began = time.perf_counter()
     ray.init(address=address, include_dashboard=False, log_to_driver=False, ignore_reinit_error=True,
              configure_logging=False)
     try:
         resources = tune.with_resources(trainable, {"cpu": cpus_per_trial})
-        if resume:
+        if restore:
             tuner = tune.Tuner.restore(str(experiment), trainable=resources, resume_errored=True)
         else:
             base = {"curriculum": curriculum, "source": str(Path(source).resolve()), "sweep_dir": str(out), "device": device}
