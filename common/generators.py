@@ -16,6 +16,7 @@ from typing import Callable, Iterator, Literal, NamedTuple
 import numpy as np
 
 from common.errors import ConfigError, quote
+from common import placement
 from common.occupancy import goal_reachable
 from common.scenario import BoxObstacle, CircleObstacle, Obstacle, Scenario
 
@@ -25,36 +26,30 @@ _SPLIT_IDS = {"train": 0, "eval": 1}
 _MAX_ATTEMPTS = 200
 
 
-_CIRCLE_POINTS = 32
-_UNIT_CIRCLE = np.column_stack([np.cos(np.linspace(0.0, 2.0 * math.pi, _CIRCLE_POINTS, endpoint=False)),
-                                np.sin(np.linspace(0.0, 2.0 * math.pi, _CIRCLE_POINTS, endpoint=False))])
-_SIDE_STEPS = np.linspace(0.0, 1.0, 8, endpoint=False)[:, None]
+class _Shape(NamedTuple):
+    """A proposed obstacle as raw numbers; it becomes a validated obstacle only once it fits."""
 
+    kind: int  # placement.CIRCLE or placement.BOX
+    x: float
+    y: float
+    size: tuple[float, ...]  # (radius,) or (length, width, yaw)
+    height: float
 
-def _outline(obstacle: Obstacle) -> np.ndarray:
-    """Points along the obstacle's boundary (enough to measure gaps between convex shapes)."""
-    if isinstance(obstacle, CircleObstacle):
-        return _UNIT_CIRCLE * obstacle.radius + (obstacle.x, obstacle.y)
-    assert isinstance(obstacle, BoxObstacle)
-    corners = obstacle.corners()
-    ends = np.roll(corners, -1, axis=0)
-    # Each side's eight points (its start included), sides in order: as 8 steps along each edge.
-    return (corners[:, None, :] + _SIDE_STEPS[None] * (ends - corners)[:, None, :]).reshape(-1, 2)
+    @property
+    def params(self) -> np.ndarray:
+        return np.array([self.x, self.y, *self.size, *(0.0,) * (3 - len(self.size))])
 
-
-class _Placed(NamedTuple):
-    """An obstacle with what the gap checks need of it."""
-
-    obstacle: Obstacle
-    outline: np.ndarray
-    centre: np.ndarray
-    radius: float
+    def build(self) -> Obstacle:
+        if self.kind == placement.CIRCLE:
+            return CircleObstacle(x=self.x, y=self.y, radius=self.size[0], height=self.height)
+        length, width, yaw = self.size
+        return BoxObstacle(x=self.x, y=self.y, length=length, width=width, yaw=yaw, height=self.height)
 
 
 class _Layout:
     """Obstacles placed one by one, each rejected if it crowds another, the start, the goal or a wall."""
 
-    def __init__(self, template: Scenario, rng: np.random.Generator, start, goal) -> None:
+    def __init__(self, template: Scenario, rng: np.random.Generator, start, goal, capacity: int = 32) -> None:
         self.template = template
         self.rng = rng
         self.start, self.goal = start, goal
@@ -63,66 +58,60 @@ class _Layout:
         self._low = np.array(world.offset) + margin
         self._high = np.array(world.offset) + (world.width - margin, world.height - margin)
         self._ends = np.array([start[:2], goal])
-        self.placed: list[_Placed] = []
-        self._centres = np.zeros((0, 2))
-        self._radii = np.zeros(0)
+        self.obstacles: list[Obstacle] = []
+        # What the compiled check reads of the placed shapes, in arrays grown as needed.
+        self._kinds = np.zeros(capacity, dtype=np.int64)
+        self._params = np.zeros((capacity, 5))
+        self._outlines = np.zeros((capacity, placement.OUTLINE_POINTS, 2))
+        self._centres = np.zeros((capacity, 2))
+        self._radii = np.zeros(capacity)
 
-    @property
-    def obstacles(self) -> list[Obstacle]:
-        return [p.obstacle for p in self.placed]
+    def _place(self, shape: _Shape) -> bool:
+        """Place the shape if it crowds nothing; whether it was placed."""
+        count = len(self.obstacles)
+        if count == len(self._kinds):
+            for name in ("_kinds", "_params", "_outlines", "_centres", "_radii"):
+                grown = getattr(self, name)
+                setattr(self, name, np.concatenate([grown, np.zeros_like(grown)]))
+        if not placement.place(shape.kind, shape.params, self._low, self._high, self._ends,
+                               self.template.robot.bounding_radius + 0.3, self.clearance, self._kinds, self._params,
+                               self._outlines, self._centres, self._radii, count):
+            return False
+        self.obstacles.append(shape.build())
+        return True
 
-    def fits(self, obstacle: Obstacle) -> _Placed | None:
-        """The obstacle ready to place, or None if it crowds a wall, the start, the goal or another."""
-        outline = _outline(obstacle)
-        if (outline < self._low).any() or (outline > self._high).any():
-            return None
-        if obstacle.sdf(self._ends).min() < self.template.robot.bounding_radius + 0.3:
-            return None
-        centre = outline.mean(axis=0)
-        radius = float(np.hypot(*(outline - centre).T).max())
-        # Bounding circles apart by the clearance: no closer look needed. Only the near ones are
-        # measured outline to outline (the shapes are convex, so their outlines' gaps are theirs).
-        near = np.flatnonzero(np.hypot(*(self._centres - centre).T) < radius + self._radii + self.clearance)
-        for index in near:
-            other = self.placed[index]
-            if other.obstacle.sdf(outline).min() < self.clearance or obstacle.sdf(other.outline).min() < self.clearance:
-                return None
-        return _Placed(obstacle, outline, centre, radius)
-
-    def add(self, propose: Callable[[], Obstacle], count: int, tries: int = 60) -> bool:
-        """Place ``count`` obstacles from ``propose``; False if one found no free place in ``tries``."""
+    def add(self, propose: Callable[[], _Shape], count: int, tries: int = 60) -> bool:
+        """Place ``count`` shapes from ``propose``; False if one found no free place in ``tries``."""
         for _ in range(count):
-            for _ in range(tries):
-                placed = self.fits(propose())
-                if placed is not None:
-                    self.placed.append(placed)
-                    self._centres = np.vstack([self._centres, placed.centre])
-                    self._radii = np.append(self._radii, placed.radius)
-                    break
-            else:
+            if not any(self._place(propose()) for _ in range(tries)):
                 return False
         return True
 
+    def uniform(self, low: float, high: float) -> float:
+        """``rng.uniform(low, high)`` bit for bit (NumPy computes low + (high - low) * random()), at
+        a third of its call cost: the layouts draw thousands of these per scenario."""
+        return low + (high - low) * self.rng.random()
+
     def near_route(self, spread: float) -> tuple[float, float]:
         """A point on the start-goal segment's middle stretch, jittered sideways."""
-        t = self.rng.uniform(0.25, 0.75)
+        t = self.uniform(0.25, 0.75)
         sx, sy = self.start[:2]
         gx, gy = self.goal
         heading = math.atan2(gy - sy, gx - sx)
-        side = self.rng.uniform(-spread, spread)
+        side = self.uniform(-spread, spread)
         return sx + t * (gx - sx) - side * math.sin(heading), sy + t * (gy - sy) + side * math.cos(heading)
 
     def anywhere(self) -> tuple[float, float]:
         x0, y0 = self.template.world.offset
-        return self.rng.uniform(x0, x0 + self.template.world.width), self.rng.uniform(y0, y0 + self.template.world.height)
+        return self.uniform(x0, x0 + self.template.world.width), self.uniform(y0, y0 + self.template.world.height)
 
-    def circle(self, where: tuple[float, float], r_min: float, r_max: float) -> CircleObstacle:
-        return CircleObstacle(x=where[0], y=where[1], radius=self.rng.uniform(r_min, r_max))
+    def circle(self, where: tuple[float, float], r_min: float, r_max: float, height: float = 0.5) -> _Shape:
+        return _Shape(placement.CIRCLE, float(where[0]), float(where[1]), (self.uniform(r_min, r_max),), height)
 
-    def box(self, where: tuple[float, float], side_min: float, side_max: float, height: float = 0.5) -> BoxObstacle:
-        length, width = self.rng.uniform(side_min, side_max, 2)
-        return BoxObstacle(x=where[0], y=where[1], length=length, width=width,
-                           yaw=self.rng.uniform(-math.pi, math.pi), height=height)
+    def box(self, where: tuple[float, float], side_min: float, side_max: float, height: float = 0.5) -> _Shape:
+        length, width = self.uniform(side_min, side_max), self.uniform(side_min, side_max)
+        yaw = self.uniform(-math.pi, math.pi)
+        return _Shape(placement.BOX, float(where[0]), float(where[1]), (length, width, yaw), height)
 
 
 def _start_goal(template: Scenario, rng: np.random.Generator, min_distance: float, margin: float = 1.0):
@@ -166,9 +155,16 @@ def _warehouse(template: Scenario, rng: np.random.Generator, difficulty: float) 
     """Shelving rows, pillars and scattered crates: 31 obstacles, as in the 3D tutorial's warehouse."""
     start, goal = _start_goal(template, rng, 3.0 + 3.0 * difficulty)
     layout = _Layout(template, rng, start, goal)
-    shelf = lambda: BoxObstacle(x=layout.anywhere()[0], y=layout.anywhere()[1], length=rng.uniform(1.5, 2.5),
-                                width=0.4, yaw=float(rng.choice([0.0, math.pi / 2])), height=1.8)
-    pillar = lambda: CircleObstacle(x=layout.anywhere()[0], y=layout.anywhere()[1], radius=0.15, height=3.0)
+    def shelf() -> _Shape:
+        # x and y from two draws of anywhere(), as when the suites were first measured.
+        x, y = layout.anywhere()[0], layout.anywhere()[1]
+        length = layout.uniform(1.5, 2.5)
+        return _Shape(placement.BOX, float(x), float(y), (length, 0.4, float(rng.choice([0.0, math.pi / 2]))), 1.8)
+
+    def pillar() -> _Shape:
+        x, y = layout.anywhere()[0], layout.anywhere()[1]
+        return _Shape(placement.CIRCLE, float(x), float(y), (0.15,), 3.0)
+
     crate = lambda: layout.box(layout.anywhere(), 0.3, 0.7, height=0.6)
     placed = layout.add(shelf, 6) and layout.add(pillar, 5) and layout.add(crate, 20, tries=200)
     return (start, goal, layout.obstacles) if placed else None

@@ -36,6 +36,14 @@ def box_sdf(points: np.ndarray, cx: float, cy: float, length: float, width: floa
     return out
 
 
+def box_corners(x: float, y: float, length: float, width: float, yaw: float) -> np.ndarray:
+    """The four corners (4, 2) of a box, counter-clockwise."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    hl, hw = 0.5 * length, 0.5 * width
+    local = np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]])
+    return local @ np.array([[c, s], [-s, c]]) + np.array([x, y])
+
+
 def segments_distance(points: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
     """Unsigned distance from ``points`` (N, 2) to the nearest of the segments (M, 2)-(M, 2)."""
     d = ends - starts

@@ -6,6 +6,7 @@ the planners' shortest paths for SPL.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -67,14 +68,32 @@ def scenario_grid(scenario: Scenario, resolution: float = 0.2, inflation: float 
     rows = max(1, int(round(world.height / resolution)))
     xs = world.offset[0] + (np.arange(cols) + 0.5) * resolution
     ys = world.offset[1] + (np.arange(rows) + 0.5) * resolution
-    gx, gy = np.meshgrid(xs, ys)
-    points = np.column_stack([gx.ravel(), gy.ravel()])
-    occupied = (scenario.signed_distance(points) < inflation).reshape(rows, cols)
+    centres = np.stack(np.meshgrid(xs, ys), axis=-1)  # (rows, cols, 2): each cell's centre
+    occupied = np.zeros((rows, cols), dtype=bool)
+    for obstacle in scenario.obstacles:
+        if obstacle.unobstructed:
+            continue
+        # Only cells within ``inflation`` of the obstacle's bounding box can be occupied by it:
+        # measuring just those makes a grid cost its obstacles' area, not the world's.
+        x_min, y_min, x_max, y_max = obstacle.bounds()
+        c0, c1 = _cell_span(x_min - inflation, x_max + inflation, world.offset[0], resolution, cols)
+        r0, r1 = _cell_span(y_min - inflation, y_max + inflation, world.offset[1], resolution, rows)
+        if c0 < c1 and r0 < r1:
+            near = obstacle.sdf(np.ascontiguousarray(centres[r0:r1, c0:c1]).reshape(-1, 2)) < inflation
+            occupied[r0:r1, c0:c1] |= near.reshape(r1 - r0, c1 - c0)
+    gx, gy = centres[..., 0], centres[..., 1]
     if world.walls:
         x0, y0 = world.offset
         occupied |= (gx - x0 < inflation) | (x0 + world.width - gx < inflation)
         occupied |= (gy - y0 < inflation) | (y0 + world.height - gy < inflation)
     return OccupancyGrid(occupied=occupied, origin=tuple(world.offset), resolution=resolution)
+
+
+def _cell_span(low: float, high: float, origin: float, resolution: float, cells: int) -> tuple[int, int]:
+    """The cells [first, last) whose centres may lie within [low, high], one spare cell each side."""
+    first = math.floor((low - origin) / resolution - 0.5) - 1
+    last = math.ceil((high - origin) / resolution - 0.5) + 2
+    return max(0, min(cells, first)), max(0, min(cells, last))
 
 
 def goal_reachable(scenario: Scenario, resolution: float = 0.1) -> bool:

@@ -61,6 +61,10 @@ class CircleObstacle(_Frozen):
         """Signed distance from points (N, 2) to this obstacle."""
         return geometry.circle_sdf(points, self.x, self.y, self.radius)
 
+    def bounds(self) -> tuple[float, float, float, float]:
+        """The axis-aligned box (x_min, y_min, x_max, y_max) holding the obstacle."""
+        return self.x - self.radius, self.y - self.radius, self.x + self.radius, self.y + self.radius
+
 
 class BoxObstacle(_Frozen):
     """A box: centre (x, y), ``length`` along its local x, ``width`` along local y, rotated by ``yaw``."""
@@ -80,10 +84,11 @@ class BoxObstacle(_Frozen):
 
     def corners(self) -> np.ndarray:
         """The four corners (4, 2), counter-clockwise."""
-        c, s = math.cos(self.yaw), math.sin(self.yaw)
-        hl, hw = 0.5 * self.length, 0.5 * self.width
-        local = np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]])
-        return local @ np.array([[c, s], [-s, c]]) + np.array([self.x, self.y])
+        return geometry.box_corners(self.x, self.y, self.length, self.width, self.yaw)
+
+    def bounds(self) -> tuple[float, float, float, float]:
+        """The axis-aligned box (x_min, y_min, x_max, y_max) holding the obstacle."""
+        return _bounds(self.corners())
 
 
 class PolygonObstacle(_Frozen):
@@ -104,6 +109,10 @@ class PolygonObstacle(_Frozen):
         """Signed distance from points (N, 2) to this obstacle."""
         return geometry.polygon_sdf(points, np.asarray(self.vertices, dtype=float))
 
+    def bounds(self) -> tuple[float, float, float, float]:
+        """The axis-aligned box (x_min, y_min, x_max, y_max) holding the obstacle."""
+        return _bounds(np.asarray(self.vertices, dtype=float))
+
 
 class SegmentObstacle(_Frozen):
     """A polyline of zero thickness (a wall or an IR-SIM ``linestring``)."""
@@ -117,6 +126,15 @@ class SegmentObstacle(_Frozen):
         """Distance from points (N, 2) to the polyline (never negative: it has no inside)."""
         p = np.asarray(self.points, dtype=float)
         return geometry.segments_distance(points, p[:-1], p[1:])
+
+    def bounds(self) -> tuple[float, float, float, float]:
+        """The axis-aligned box (x_min, y_min, x_max, y_max) holding the obstacle."""
+        return _bounds(np.asarray(self.points, dtype=float))
+
+
+def _bounds(points: np.ndarray) -> tuple[float, float, float, float]:
+    (x_min, y_min), (x_max, y_max) = points.min(axis=0), points.max(axis=0)
+    return float(x_min), float(y_min), float(x_max), float(y_max)
 
 
 Obstacle = Annotated[

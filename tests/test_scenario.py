@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 
 import numpy as np
@@ -43,6 +45,21 @@ def test_generated_scenarios_round_trip_and_are_valid(kind, tmp_path):
 def test_generators_are_deterministic_and_seed_sensitive(kind):
     assert generate(kind, 7) == generate(kind, 7)
     assert generate(kind, 7) != generate(kind, 8)
+
+
+# Digests of the first 20 train and 20 eval scenarios of each kind at its suite's difficulty, as
+# every published figure was measured on them. A change to the generators that moves a single
+# obstacle changes a digest: then re-measure docs/benchmarks.md and update these on purpose.
+SUITE_DIGESTS = {"open": "7dd5a0357ca22cea", "sparse": "f6460bdee89d46da", "cluttered": "096ce43262819b31",
+                 "warehouse": "08dabd76ddf8a343", "trap": "565ea0984c189ebc"}
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_the_generated_scenarios_are_the_ones_the_figures_were_measured_on(kind):
+    difficulty = SUITES[kind].difficulty
+    drawn = [generate(kind, seed, difficulty, split).model_dump(mode="json")
+             for split in ("train", "eval") for seed in range(20)]
+    assert hashlib.sha256(json.dumps(drawn, sort_keys=True).encode()).hexdigest()[:16] == SUITE_DIGESTS[kind]
 
 
 def test_train_and_eval_splits_differ_for_the_same_seed():
@@ -117,6 +134,33 @@ def test_grid_marks_inflated_obstacles_and_walls():
     assert grid.occupied[grid.cell_of(6.1, 5)]  # within radius + inflation
     assert not grid.occupied[grid.cell_of(6.5, 5)]
     assert grid.occupied[grid.cell_of(0.05, 5)]  # the wall, inflated
+
+
+def test_the_grid_is_the_one_measuring_every_cell_would_give():
+    # scenario_grid measures only the cells near each obstacle; no cell may come out differently.
+    rng = np.random.default_rng(0)
+    for trial in range(40):
+        obstacles = [
+            CircleObstacle(x=rng.uniform(-1, 9), y=rng.uniform(-1, 7), radius=rng.uniform(0.05, 1.5)),
+            BoxObstacle(x=rng.uniform(-1, 9), y=rng.uniform(-1, 7), length=rng.uniform(0.05, 3), width=rng.uniform(0.05, 2),
+                        yaw=rng.uniform(-4, 4)),
+            PolygonObstacle(vertices=[(3, 1), (4.5, 1.2), (4, 2.5)]),
+            SegmentObstacle(points=[tuple(rng.uniform(0, 8, 2)), tuple(rng.uniform(0, 6, 2)), tuple(rng.uniform(0, 8, 2))]),
+            CircleObstacle(x=4, y=3, radius=0.8, unobstructed=True),
+        ]
+        world = {"width": 8.0, "height": 6.0, "offset": (rng.uniform(-2, 2), rng.uniform(-2, 2)), "walls": trial % 2 == 0}
+        scenario = Scenario(world=world, start=(1, 1, 0), goal=(7, 5), obstacles=obstacles)
+        resolution, inflation = rng.choice([0.05, 0.1, 0.2, 0.33]), rng.choice([0.0, 0.2, 0.45])
+        grid = scenario_grid(scenario, resolution, inflation)
+        rows, cols = grid.occupied.shape
+        xs = scenario.world.offset[0] + (np.arange(cols) + 0.5) * resolution
+        ys = scenario.world.offset[1] + (np.arange(rows) + 0.5) * resolution
+        gx, gy = np.meshgrid(xs, ys)
+        every = (scenario.signed_distance(np.column_stack([gx.ravel(), gy.ravel()])) < inflation).reshape(rows, cols)
+        if scenario.world.walls:
+            x0, y0 = scenario.world.offset
+            every |= (gx - x0 < inflation) | (x0 + 8.0 - gx < inflation) | (gy - y0 < inflation) | (y0 + 6.0 - gy < inflation)
+        assert np.array_equal(grid.occupied, every), trial
 
 
 def test_suites_are_reproducible_and_shifted_by_seed():
