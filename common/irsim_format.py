@@ -301,34 +301,40 @@ def _random_points(draws: _Draws, low: list[float], high: list[float], number: i
     impossible spacing is an error within a fraction of a second rather than minutes of draws."""
     tries = 1000
     rng = draws.rng
-    low3, high3 = low[:3], high[:3]
-    points = np.zeros((number, 3))
+    low3 = np.asarray(low[:3], dtype=float)
+    span = np.asarray(high[:3], dtype=float) - low3
     advice = "a smaller min_distance, fewer objects or a wider range"
-    for i in range(number):
-        # IR-SIM draws one candidate at a time; drawing k at once yields the same numbers, so
-        # candidates come in chunks growing fourfold, and after an acceptance the generator is
-        # rewound and advanced by exactly the draws IR-SIM's loop would have made.
-        start, size = 0, 1
+    # IR-SIM draws one candidate at a time with rng.uniform(low, high). The candidates are drawn
+    # here in blocks with the arithmetic NumPy's uniform uses (low + span * random(), bit for bit),
+    # and at the end the generator is rewound and advanced by exactly the draws IR-SIM made.
+    if number == 0:
+        return []
+    saved = rng.bit_generator.state
+    candidates = low3 + span * rng.random((4 * number, 3))
+    points = np.zeros((number, 3))
+    points[0], used = candidates[0], 1
+    for i in range(1, number):
+        scanned, size = 0, 1
         while True:
-            size = min(size, tries - start)
-            saved = rng.bit_generator.state
-            chunk = rng.uniform(low3, high3, size=(size, 3))
-            if i == 0:
-                points[0] = chunk[0]
-                break
+            size = min(size, tries - scanned)
+            first = used + scanned
+            if first + size > len(candidates):
+                more = max(len(candidates), size)
+                candidates = np.concatenate([candidates, low3 + span * rng.random((more, 3))])
+            chunk = candidates[first:first + size]
             draws.spend("checks", size * i, path, advice)
             gaps = np.hypot(chunk[:, None, 0] - points[None, :i, 0], chunk[:, None, 1] - points[None, :i, 1])
             accepted = np.flatnonzero(gaps.min(axis=1) >= min_distance)
-            start += size
-            if accepted.size or start >= tries:
+            scanned += size
+            if accepted.size or scanned >= tries:
                 # Accepted, or every try failed and the last draw is kept.
                 k = int(accepted[0]) if accepted.size else size - 1
-                if k < size - 1:
-                    rng.bit_generator.state = saved
-                    rng.uniform(low3, high3, size=(k + 1, 3))
                 points[i] = chunk[k]
+                used = first + k + 1
                 break
             size *= 4
+    rng.bit_generator.state = saved
+    rng.random(3 * used)
     return points.tolist()
 
 
