@@ -18,6 +18,7 @@ import numpy as np
 import yaml
 
 from common.actions import ActionMapping
+from common.errors import ConfigError
 from common.generators import SUITES
 from common.occupancy import OccupancyGrid, scenario_grid
 from common.planners import RRT, AStar, Planner, path_length
@@ -52,6 +53,19 @@ def flatland_steps_per_s(world: Scenario | str | Path, steps: int = 20_000, seed
     elapsed = time.perf_counter() - start
     env.close()
     return steps / elapsed
+
+
+@contextlib.contextmanager
+def _c_stdout_to_stderr():
+    """PyBullet's GUI prints from C to file descriptor 1; keep stdout for our JSON."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    os.dup2(2, 1)
+    try:
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
 
 
 def _import_irsim():
@@ -224,6 +238,33 @@ def physics3d_steps_per_s(scenario: Scenario, steps: int = 2_000, seed: int = 0)
     elapsed = time.perf_counter() - start
     env.close()
     return steps / elapsed, resets
+
+
+def gui_figures(steps: int = 300, seed: int = 0) -> dict[str, float]:
+    """The PyBullet GUI (``render_mode="human"``, its previews and debug drawing on) under random
+    actions: steps per second against real time (one control period per step, which the GUI
+    paces to), so ``gui_vs_real_time`` 1.0 means it keeps real time. Needs an X display."""
+    if not os.environ.get("DISPLAY"):
+        raise ConfigError(None, "--gui", "needs an X display (DISPLAY is not set); run it as: xvfb-run -a curriculum bench --gui")
+    import gymnasium as gym
+
+    import physics3d  # noqa: F401  (registers the env)
+
+    with _c_stdout_to_stderr():
+        env = gym.make("physics3d/WarehouseNav-v0", world=physics3d_bench_scenario(), observation="lidar43",
+                       render_mode="human")
+        actions = np.random.default_rng(seed).uniform(-1.0, 1.0, (steps, 2)).astype(np.float32)
+        env.reset(seed=seed)
+        start = time.perf_counter()
+        for action in actions:
+            _, _, terminated, truncated, _ = env.step(action)
+            if terminated or truncated:
+                env.reset()
+        elapsed = time.perf_counter() - start
+        real_time = 1.0 / env.unwrapped.world.period
+        env.close()
+    return {"gui_steps_per_s": round(steps / elapsed, 2), "gui_real_time_steps_per_s": real_time,
+            "gui_vs_real_time": round(steps / elapsed / real_time, 3)}
 
 
 def bare_pybullet_steps_per_s(scenario: Scenario, steps: int = 2_000, seed: int = 0, resets: Sequence[int] = ()) -> float:

@@ -104,9 +104,9 @@ def _policies(paths):
 
 
 def _bench(args: argparse.Namespace) -> int:
-    from common.bench import run_benchmarks
+    from common.bench import gui_figures, run_benchmarks
 
-    results = run_benchmarks(steps=args.steps)
+    results = gui_figures() if args.gui else run_benchmarks(steps=args.steps)
     if args.json:
         print(json.dumps(results))
         return 0
@@ -385,6 +385,8 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--json", action="store_true", help="print one JSON object")
     bench.add_argument("--steps", type=_whole(100, 10_000_000), default=20_000,
                        help="flatland steps to time, at least 100 (IR-SIM runs a tenth)")
+    bench.add_argument("--gui", action="store_true",
+                       help="instead: the PyBullet GUI's speed against real time (needs a display; xvfb-run works)")
     bench.set_defaults(handler=_bench)
 
     compare = commands.add_parser("compare", help="run agents on the same scenarios; Markdown, CSV, PNG and JSON")

@@ -68,6 +68,13 @@ def test_bench_json_has_the_agreed_keys(capsys):
     assert 0 < results["ppo_rollout_share_sparse"] < 1
 
 
+def test_bench_gui_without_a_display_says_how_to_run_it(monkeypatch, capsys):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    assert main(["bench", "--gui"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["error: --gui: needs an X display (DISPLAY is not set); run it as: xvfb-run -a curriculum bench --gui"]
+
+
 @pytest.mark.parametrize("argv, expected", [
     (["compare", "--episodes", "0"], "--episodes: must be from 1 to"),
     (["compare", "--suite", "mars"], "invalid choice: 'mars'"),
