@@ -38,9 +38,11 @@ def test_the_transfer_policy_carries_its_evidence():
 
 
 @pytest.mark.parametrize("name", ["stage1_2d_ppo", "stage1_2d_sac", "stage1_2d_td3"])
-def test_a_shipped_sparse_policy_still_arrives(name):
-    # Ten held-out episodes: the shipped figures are 96-100%, so 8 of 10 fails only when the
-    # observation, the action mapping or the weights no longer reach the policy as trained.
+def test_a_shipped_sparse_policy_still_arrives_within_a_tenth_of_a_metre(name):
+    # Ten held-out episodes judged at IR-SIM's default radius, the tightest the policies promise:
+    # their figures there are 96.5-98.5%, so 8 of 10 fails only when the observation, the action
+    # mapping or the weights no longer reach the policy as trained.
     agent = load_policy(POLICIES / f"{name}.zip")
-    (summary,) = evaluate([agent], get_suite("sparse").scenarios(count=10, seed=100_000), seed=100_000)
+    tight = [s.model_copy(update={"goal_threshold": 0.1}) for s in get_suite("sparse").scenarios(count=10, seed=100_000)]
+    (summary,) = evaluate([agent], tight, seed=100_000)
     assert summary.success_rate >= 0.8
