@@ -46,3 +46,12 @@ def test_a_shipped_sparse_policy_still_arrives_within_a_tenth_of_a_metre(name):
     tight = [s.model_copy(update={"goal_threshold": 0.1}) for s in get_suite("sparse").scenarios(count=10, seed=100_000)]
     (summary,) = evaluate([agent], tight, seed=100_000)
     assert summary.success_rate >= 0.8
+
+
+def test_the_shipped_curriculum_policy_arrives_within_a_tenth_of_a_metre_among_clutter():
+    # Its test figure there is 92.5% of 200 (trained at 0.1 m); 8 of 10 fails only when something
+    # between the zip and the env no longer matches its training.
+    agent = load_policy(POLICIES / "curriculum_2d_ppo.zip")
+    tight = [s.model_copy(update={"goal_threshold": 0.1}) for s in get_suite("cluttered").scenarios(count=10, seed=100_000)]
+    (summary,) = evaluate([agent], tight, seed=100_000)
+    assert summary.success_rate >= 0.8
