@@ -76,10 +76,14 @@ def test_trials_spread_over_the_nodes_of_a_cluster(tmp_path):
     cluster.add_node(num_cpus=1)
     try:
         results = run_sweep(TINY, tmp_path / "sweep", seeds=2, address=cluster.address)
+        # Without --address a sweep runs on a Ray of its own, not on the cluster this machine started last.
+        local = run_sweep(TINY, tmp_path / "local", seeds=1)
     finally:
         cluster.shutdown()
     assert {t["status"] for t in results["trials"]} == {"done"}
-    assert len({t["node"] for t in results["trials"]}) == 2, results["trials"]  # one trial on each node
+    nodes = {t["node"] for t in results["trials"]}
+    assert len(nodes) == 2, results["trials"]  # one trial on each node
+    assert local["trials"][0]["status"] == "done" and local["trials"][0]["node"] not in nodes
 
 
 @pytest.mark.slow

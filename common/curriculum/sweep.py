@@ -5,8 +5,8 @@ about a run changes when it is swept, and a trial that dies (its process killed,
 retried by Tune and resumes from its run's last checkpoint. The runner reports every periodic
 evaluation to Tune; in a search, ASHA stops the hopeless trials early and Optuna proposes the next.
 
-Ray runs in-process by default (``ray.init()``: a local cluster of this machine's cores); with
-``address`` the trials go to an existing cluster (``ray start --head`` on one machine, ``ray start
+Ray runs in-process by default (``ray.init(address="local")``: a new local cluster of this
+machine's cores, never one already running here); with ``address`` the trials go to an existing cluster (``ray start --head`` on one machine, ``ray start
 --address HEAD:6379`` on the others). The sweep directory must be on storage every node sees.
 
 Results: ``OUT/sweep.json`` (every trial with its seed, parameters, status, final test figures and
@@ -205,7 +205,9 @@ def run_sweep(source: str | Path, out: Path, seeds: int = 1, space: str | Path |
         # from its own run directory, which is where the training lives.
         shutil.rmtree(experiment, ignore_errors=True)
     began = time.perf_counter()
-    ray.init(address=address, include_dashboard=False, log_to_driver=False, ignore_reinit_error=True,
+    # "local": a Ray of its own, as documented. Without it Ray joins whatever cluster this machine
+    # last started (another sweep's, a test's, a `ray start`), and dies when that one does.
+    ray.init(address=address or "local", include_dashboard=False, log_to_driver=False, ignore_reinit_error=True,
              configure_logging=False)
     try:
         resources = tune.with_resources(trainable, {"cpu": cpus_per_trial})
