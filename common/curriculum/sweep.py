@@ -6,8 +6,9 @@ retried by Tune and resumes from its run's last checkpoint. The runner reports e
 evaluation to Tune; in a search, ASHA stops the hopeless trials early and Optuna proposes the next.
 
 Ray runs in-process by default (``ray.init(address="local")``: a new local cluster of this
-machine's cores, never one already running here); with ``address`` the trials go to an existing cluster (``ray start --head`` on one machine, ``ray start
---address HEAD:6379`` on the others). The sweep directory must be on storage every node sees.
+machine's cores, never one already running here); with ``address`` the trials go to an existing
+cluster (``ray start --head`` on one machine, ``ray start --address HEAD:6379`` on the others).
+The sweep directory must be on storage every node sees.
 
 Results: ``OUT/sweep.json`` (every trial with its seed, parameters, status, final test figures and
 run directory; ``aggregate`` per metric: mean, interquartile mean and a bootstrap 95 % interval),
