@@ -44,15 +44,20 @@ def flatland_steps_per_s(world: Scenario | str | Path, steps: int = 20_000, seed
     for action in actions[:200]:  # warm-up: numba kernels compiled or loaded from cache
         if any(env.step(action)[2:4]):
             env.reset()
+    elapsed = _timed_random_drive(env, actions, seed)
+    env.close()
+    return steps / elapsed
+
+
+def _timed_random_drive(env, actions: np.ndarray, seed: int) -> float:
+    """Seconds to step ``env`` through ``actions`` from ``reset(seed)``, resetting as episodes end."""
     env.reset(seed=seed)
     start = time.perf_counter()
     for action in actions:
         _, _, terminated, truncated, _ = env.step(action)
         if terminated or truncated:
             env.reset()
-    elapsed = time.perf_counter() - start
-    env.close()
-    return steps / elapsed
+    return time.perf_counter() - start
 
 
 @contextlib.contextmanager
@@ -254,13 +259,7 @@ def gui_figures(steps: int = 300, seed: int = 0) -> dict[str, float]:
         env = gym.make("physics3d/WarehouseNav-v0", world=physics3d_bench_scenario(), observation="lidar43",
                        render_mode="human")
         actions = np.random.default_rng(seed).uniform(-1.0, 1.0, (steps, 2)).astype(np.float32)
-        env.reset(seed=seed)
-        start = time.perf_counter()
-        for action in actions:
-            _, _, terminated, truncated, _ = env.step(action)
-            if terminated or truncated:
-                env.reset()
-        elapsed = time.perf_counter() - start
+        elapsed = _timed_random_drive(env, actions, seed)
         real_time = 1.0 / env.unwrapped.world.period
         env.close()
     return {"gui_steps_per_s": round(steps / elapsed, 2), "gui_real_time_steps_per_s": real_time,
