@@ -61,13 +61,15 @@ def _timed_random_drive(env, actions: np.ndarray, seed: int) -> float:
 
 
 @contextlib.contextmanager
-def _c_stdout_to_stderr():
-    """PyBullet's GUI prints from C to file descriptor 1; keep stdout for our JSON."""
+def _stdout_to_stderr():
+    """Keep stdout for our JSON: what Python code prints (IR-SIM probing its GUI backends on
+    import) and what C libraries write to descriptor 1 (PyBullet's GUI) goes to stderr."""
     sys.stdout.flush()
     saved = os.dup(1)
     os.dup2(2, 1)
     try:
-        yield
+        with contextlib.redirect_stdout(sys.stderr):
+            yield
     finally:
         os.dup2(saved, 1)
         os.close(saved)
@@ -77,8 +79,7 @@ def _import_irsim():
     """IR-SIM, or None where it is not installed."""
     os.environ.setdefault("MPLBACKEND", "Agg")
     try:
-        # IR-SIM prints its GUI-backend probing to stdout on import; keep stdout for our JSON.
-        with contextlib.redirect_stdout(sys.stderr):
+        with _stdout_to_stderr():
             import irsim
     except ImportError:
         return None
@@ -255,7 +256,7 @@ def gui_figures(steps: int = 300, seed: int = 0) -> dict[str, float]:
 
     import physics3d  # noqa: F401  (registers the env)
 
-    with _c_stdout_to_stderr():
+    with _stdout_to_stderr():
         env = gym.make("physics3d/WarehouseNav-v0", world=physics3d_bench_scenario(), observation="lidar43",
                        render_mode="human")
         actions = np.random.default_rng(seed).uniform(-1.0, 1.0, (steps, 2)).astype(np.float32)

@@ -106,7 +106,10 @@ def _policies(paths):
 def _bench(args: argparse.Namespace) -> int:
     from common.bench import gui_figures, run_benchmarks
 
-    results = gui_figures() if args.gui else run_benchmarks(steps=args.steps)
+    if args.gui:
+        results = gui_figures(steps=args.steps or 300)
+    else:
+        results = run_benchmarks(steps=args.steps or 20_000)
     if args.json:
         print(json.dumps(results))
         return 0
@@ -383,8 +386,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     bench = commands.add_parser("bench", help="measure simulator speed against references in the same run")
     bench.add_argument("--json", action="store_true", help="print one JSON object")
-    bench.add_argument("--steps", type=_whole(100, 10_000_000), default=20_000,
-                       help="flatland steps to time, at least 100 (IR-SIM runs a tenth)")
+    bench.add_argument("--steps", type=_whole(100, 10_000_000),
+                       help="steps to time, at least 100: flatland's (default 20,000; IR-SIM runs a tenth), or "
+                            "the GUI's with --gui (default 300)")
     bench.add_argument("--gui", action="store_true",
                        help="instead: the PyBullet GUI's speed against real time (needs a display; xvfb-run works)")
     bench.set_defaults(handler=_bench)

@@ -15,8 +15,8 @@ from typing import Callable, Iterator, Literal, NamedTuple
 
 import numpy as np
 
-from common.errors import ConfigError, quote
 from common import placement
+from common.errors import ConfigError, quote
 from common.occupancy import goal_reachable
 from common.scenario import BoxObstacle, CircleObstacle, Obstacle, Scenario
 
@@ -63,19 +63,17 @@ class _Layout:
         self._kinds = np.zeros(capacity, dtype=np.int64)
         self._params = np.zeros((capacity, 5))
         self._outlines = np.zeros((capacity, placement.OUTLINE_POINTS, 2))
-        self._centres = np.zeros((capacity, 2))
-        self._radii = np.zeros(capacity)
 
     def _place(self, shape: _Shape) -> bool:
         """Place the shape if it crowds nothing; whether it was placed."""
         count = len(self.obstacles)
         if count == len(self._kinds):
-            for name in ("_kinds", "_params", "_outlines", "_centres", "_radii"):
+            for name in ("_kinds", "_params", "_outlines"):
                 grown = getattr(self, name)
                 setattr(self, name, np.concatenate([grown, np.zeros_like(grown)]))
         if not placement.place(shape.kind, shape.params, self._low, self._high, self._ends,
                                self.template.robot.bounding_radius + 0.3, self.clearance, self._kinds, self._params,
-                               self._outlines, self._centres, self._radii, count):
+                               self._outlines, count):
             return False
         self.obstacles.append(shape.build())
         return True
@@ -105,8 +103,8 @@ class _Layout:
         x0, y0 = self.template.world.offset
         return self.uniform(x0, x0 + self.template.world.width), self.uniform(y0, y0 + self.template.world.height)
 
-    def circle(self, where: tuple[float, float], r_min: float, r_max: float, height: float = 0.5) -> _Shape:
-        return _Shape(placement.CIRCLE, float(where[0]), float(where[1]), (self.uniform(r_min, r_max),), height)
+    def circle(self, where: tuple[float, float], r_min: float, r_max: float) -> _Shape:
+        return _Shape(placement.CIRCLE, float(where[0]), float(where[1]), (self.uniform(r_min, r_max),), 0.5)
 
     def box(self, where: tuple[float, float], side_min: float, side_max: float, height: float = 0.5) -> _Shape:
         length, width = self.uniform(side_min, side_max), self.uniform(side_min, side_max)

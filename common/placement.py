@@ -26,6 +26,12 @@ def shape_sdf(kind: int, params: np.ndarray, points: np.ndarray) -> np.ndarray:
     return box_sdf(points, params[0], params[1], params[2], params[3], params[4])
 
 
+@njit(cache=True)
+def bounding_radius(kind: int, params: np.ndarray) -> float:
+    """The radius about the shape's centre (x, y) that holds it."""
+    return params[2] if kind == CIRCLE else 0.5 * math.hypot(params[2], params[3])
+
+
 _CIRCLE_POINTS = 32
 _SIDE_POINTS = 8  # per box side: a box's outline also has 32 points
 OUTLINE_POINTS = _CIRCLE_POINTS
@@ -57,13 +63,12 @@ def outline(kind: int, params: np.ndarray, out: np.ndarray) -> None:
 
 @njit(cache=True)
 def place(kind: int, params: np.ndarray, low: np.ndarray, high: np.ndarray, ends: np.ndarray, end_clearance: float,
-          clearance: float, kinds: np.ndarray, placed: np.ndarray, outlines: np.ndarray, centres: np.ndarray,
-          radii: np.ndarray, count: int) -> bool:
+          clearance: float, kinds: np.ndarray, placed: np.ndarray, outlines: np.ndarray, count: int) -> bool:
     """Record the shape as the ``count``-th placed one if it fits; whether it did.
 
     It must keep ``clearance`` from the ``count`` shapes already placed, ``end_clearance`` from the
     start and goal (``ends``), and its outline must lie within [low, high]. The arrays hold the placed
-    shapes' kinds, parameters, outlines, and outline centres and bounding radii, with room at ``count``.
+    shapes' kinds, parameters and outlines, with room at ``count``.
     """
     points = outlines[count]
     outline(kind, params, points)
@@ -73,23 +78,16 @@ def place(kind: int, params: np.ndarray, low: np.ndarray, high: np.ndarray, ends
             return False
     if shape_sdf(kind, params, ends).min() < end_clearance:
         return False
-    cx, cy = 0.0, 0.0
-    for i in range(n):
-        cx += points[i, 0]
-        cy += points[i, 1]
-    cx, cy = cx / n, cy / n
-    radius = 0.0
-    for i in range(n):
-        radius = max(radius, math.hypot(points[i, 0] - cx, points[i, 1] - cy))
+    radius = bounding_radius(kind, params)
     for j in range(count):
         # Bounding circles apart by the clearance need no closer look. Near ones are measured
         # outline to outline: the shapes are convex, so their outlines' gaps are theirs.
-        if math.hypot(centres[j, 0] - cx, centres[j, 1] - cy) >= radius + radii[j] + clearance:
+        gap = radius + bounding_radius(kinds[j], placed[j]) + clearance
+        if math.hypot(placed[j, 0] - params[0], placed[j, 1] - params[1]) >= gap:
             continue
         if shape_sdf(kinds[j], placed[j], points).min() < clearance:
             return False
         if shape_sdf(kind, params, outlines[j]).min() < clearance:
             return False
     kinds[count], placed[count] = kind, params
-    centres[count, 0], centres[count, 1], radii[count] = cx, cy, radius
     return True

@@ -8,11 +8,9 @@ robot and anything but the floor. ``reset``/``step`` return the same :class:`Rea
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
 import sys
-from typing import Iterator
 
 import numpy as np
 import pybullet as p
@@ -138,26 +136,18 @@ class World:
         # A contact at any sub-step counts: a graze that separates again within the control period
         # is a collision too, not only one still touching at its end.
         collided = False
-        with self._drawing_paused():
-            for _ in range(self.substeps):
-                p.stepSimulation(physicsClientId=self.client)
-                collided = collided or bool(self.touching())
+        if self.gui:
+            # Draw the end of the period, not each sub-step: drawing 24 frames a period is what
+            # held the GUI at a third of real time on a software renderer.
+            p.configureDebugVisualizer(p.COV_ENABLE_RENDERING, 0, physicsClientId=self.client)
+        for _ in range(self.substeps):
+            p.stepSimulation(physicsClientId=self.client)
+            collided = collided or bool(self.touching())
+        if self.gui:
+            p.configureDebugVisualizer(p.COV_ENABLE_RENDERING, 1, physicsClientId=self.client)
         self.steps += 1
         self.readings = self._read(self.period, collided)
         return self.readings
-
-    @contextlib.contextmanager
-    def _drawing_paused(self) -> Iterator[None]:
-        """In the GUI, draw the end of a control period, not each of its sub-steps: drawing 24
-        frames a period is what held the GUI at a third of real time on a software renderer."""
-        if not self.gui:
-            yield
-            return
-        p.configureDebugVisualizer(p.COV_ENABLE_RENDERING, 0, physicsClientId=self.client)
-        try:
-            yield
-        finally:
-            p.configureDebugVisualizer(p.COV_ENABLE_RENDERING, 1, physicsClientId=self.client)
 
     def pose(self) -> Pose2D:
         """The robot's true planar pose (body centre, yaw)."""

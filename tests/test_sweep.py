@@ -106,6 +106,7 @@ def test_an_interrupted_sweep_continues_with_resume(tmp_path):
     # Eight times the tiny budget, so the driver is still training when it is killed on a busy machine.
     longer = tmp_path / "longer.yaml"
     longer.write_text(TINY.read_text().replace("budget: 512", "budget: 4096").replace("every: 128", "every: 512"))
+    assert "budget: 4096" in longer.read_text() and "every: 512" in longer.read_text()
     out = tmp_path / "sweep"
     driver = subprocess.Popen([sys.executable, "-m", "common.cli", "sweep", str(longer), "--seeds", "2", "--out", str(out)],
                               cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
