@@ -153,6 +153,7 @@ def ppo_steps_per_s(kind: str, steps: int = 16_384, seed: int = 0) -> tuple[floa
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.logger import Logger
 
     from flatland.env import NavEnv
 
@@ -162,6 +163,7 @@ def ppo_steps_per_s(kind: str, steps: int = 16_384, seed: int = 0) -> tuple[floa
         env = make_vec_env(NavEnv, n_envs=8, seed=seed, env_kwargs={"world": kind, "observation": "lidar43_log",
                                                                   "max_steps": 300})
         model = PPO("MlpPolicy", env, n_steps=256, batch_size=256, n_epochs=5, seed=seed, device="cpu")
+        model.set_logger(Logger(folder=None, output_formats=[]))  # else SB3 leaves an empty /tmp/SB3-* folder
         model.learn(2048)  # warm-up: the first rollout also compiles numba kernels
         spent = {"collect_rollouts": 0.0, "train": 0.0}
         for name in spent:

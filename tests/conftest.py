@@ -13,6 +13,8 @@ def pytest_configure(config):
     # The controller process makes the folder; pytest-xdist workers inherit the variable.
     if not hasattr(config, "workerinput"):
         os.environ[TABLES_ENV] = tempfile.mkdtemp(prefix="nav-tables-")
+        # SB3 gives every model trained without a logger a /tmp/SB3-<time> folder; keep them in one place.
+        os.environ.setdefault("SB3_LOGDIR", tempfile.mkdtemp(prefix="nav-sb3-logs-"))
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus, config):

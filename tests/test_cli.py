@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import tempfile
 
 import pytest
 
@@ -55,8 +56,11 @@ def test_cli_process_exits_2_without_traceback(tmp_path):
     assert "Traceback" not in result.stderr and len(result.stderr.strip().splitlines()) == 1
 
 
-def test_bench_json_has_the_agreed_keys(capsys):
+def test_bench_json_has_the_agreed_keys(capsys, monkeypatch, tmp_path):
+    monkeypatch.delenv("SB3_LOGDIR", raising=False)
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     assert main(["bench", "--json", "--steps", "2000"]) == 0
+    assert not list(tmp_path.glob("SB3-*")), "the bench left a training log folder behind"
     results = json.loads(capsys.readouterr().out)
     assert results["obstacles"] == 31 and results["lidar_beams"] == 36
     assert results["flatland_steps_per_s"] > 0
