@@ -219,15 +219,17 @@ def _conditions(args: argparse.Namespace, agents) -> "Conditions":
     if len(trained) > 1 and not override:
         raise ConfigError(None, "--policy", "these policies trained under different conditions "
                           f"({'; '.join(sorted(trained))}); give --env-kwargs to compare them under one")
-    base = json.loads(trained.pop()) if trained and not override else {}
+    # Flags override the knobs they name; the rest stay as trained (unless the policies disagree).
+    base = json.loads(trained.pop()) if len(trained) == 1 else {}
     # A policy's knobs of the other tier (2D wheel dynamics in 3D, say) do not carry over.
     resolved = Conditions.parse(base).for_tier(args.world, strict=False)
     try:
-        extra = Conditions.parse(override, field="--env-kwargs").for_tier(args.world) if override else None
+        extra = Conditions.parse(override, field="--env-kwargs")
+        extra.for_tier(args.world)  # refuses the other tier's knobs
     except ConfigError as error:
         raise ConfigError(None, error.field if error.field.startswith("--") else f"--env-kwargs.{error.field}",
                           error.problem) from None
-    return Conditions.parse({**resolved.given(), **(extra.given() if extra else {})}) if extra else resolved
+    return Conditions.parse({**resolved.given(), **extra.given()}) if override else resolved
 
 
 def _file_name(name: str) -> str:

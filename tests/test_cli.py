@@ -70,6 +70,7 @@ def test_bench_json_has_the_agreed_keys(capsys, monkeypatch, tmp_path):
     assert results["circles_flatland_steps_per_s"] > 0 and "circles_flatland_vs_irsim" in results
     assert results["warehouse_env_steps_per_s"] > 0 and results["ppo_steps_per_s_cluttered"] > 0
     assert 0 < results["ppo_rollout_share_sparse"] < 1
+    assert results["ppo_steps_per_s_cluttered_subproc"] > 0 and results["ppo_subproc_vs_dummy"] > 0
 
 
 def test_bench_gui_without_a_display_says_how_to_run_it(monkeypatch, capsys):
@@ -218,8 +219,9 @@ def test_a_policys_conditions_are_evaluated_by_default_and_the_command_line_over
 
     assert conditions().model_dump(exclude_none=True) == {"robot": "physics3d", "lidar_noise": 0.2, "action_delay": 0,
                                                            "dynamics": "first_order"}
-    assert conditions("--env-kwargs", "lidar_noise:0", "motor_scale:[0.9,1.1]").lidar_noise == 0.0
-    assert conditions("--env-kwargs", "lidar_noise:0", "motor_scale:[0.9,1.1]").motor_scale == (0.9, 1.1)
+    overridden = conditions("--env-kwargs", "lidar_noise:0", "motor_scale:[0.9,1.1]")
+    assert overridden.lidar_noise == 0.0 and overridden.motor_scale == (0.9, 1.1)
+    assert overridden.robot == "physics3d" and overridden.dynamics == "first_order"  # the knobs not named stay
     in_3d = conditions("--world", "physics3d")
     assert in_3d.dynamics is None and in_3d.lidar_noise == 0.2 and in_3d.friction == (0.8, 1.2)  # 2D-only knob dropped
     with pytest.raises(ConfigError, match="--policy: these policies trained under different conditions"):
