@@ -46,22 +46,27 @@ class WheelDynamics:
 class Actuator:
     """A command's way to the wheels: ``delay`` whole control steps late (the robot keeps the last
     command it got; at the start, standing still), scaled by a motor gain drawn per episode from
-    ``gain`` = (low, high), then through ``dynamics`` if any.
+    ``gain`` = (low, high), then through ``dynamics`` if any. ``delay`` = (low, high) draws a whole
+    number of steps per episode from that range, ends included.
     """
 
-    def __init__(self, delay: int = 0, gain: tuple[float, float] | None = None,
+    def __init__(self, delay: int | tuple[int, int] = 0, gain: tuple[float, float] | None = None,
                  dynamics: WheelDynamics | None = None) -> None:
-        self.delay, self.gain_range, self.dynamics = delay, gain, dynamics
-        self.gain = 1.0
+        self.delay_range = (delay, delay) if isinstance(delay, int) else (int(delay[0]), int(delay[1]))
+        self.gain_range, self.dynamics = gain, dynamics
+        self.delay, self.gain = self.delay_range[0], 1.0
         self._queue: collections.deque[tuple[float, float]] = collections.deque()
 
     @property
     def idle(self) -> bool:
         """Whether commands pass through unchanged (the cheap path)."""
-        return self.delay == 0 and self.gain_range is None and self.dynamics is None
+        return self.delay_range == (0, 0) and self.gain_range is None and self.dynamics is None
 
     def reset(self, rng: np.random.Generator) -> None:
-        """Start an episode: an empty pipeline, a new motor gain (drawn only if there is a range)."""
+        """Start an episode: a delay and a motor gain drawn (each only if it is a range), an empty
+        pipeline. A fixed delay draws nothing, so its episodes replay as before ranges existed."""
+        low, high = self.delay_range
+        self.delay = int(rng.integers(low, high + 1)) if high > low else low
         self._queue = collections.deque([(0.0, 0.0)] * self.delay)
         self.gain = float(rng.uniform(*self.gain_range)) if self.gain_range is not None else 1.0
         if self.dynamics is not None:

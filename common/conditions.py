@@ -15,7 +15,8 @@ knob               meaning                                                  flat
                    or a mapping of :class:`RobotProfile` fields
 ``lidar_noise``    σ of the Gaussian noise on each lidar return, m           scenario's 0.01
 ``odometry_noise`` relative σ of each wheel's measured rotation              scenario's 0.01
-``action_delay``   control steps a command arrives late                      0          0
+``action_delay``   control steps a command arrives late, or [lo, hi]: a      0          0
+                   whole number of steps drawn per episode
 ``motor_scale``    [lo, hi]: a per-episode gain on the achieved v and w      none       [0.95, 1.05]
 ``friction``       [lo, hi]: the wheels' friction coefficient per episode    (3D only)  [0.8, 1.2]
 ``mass_scale``     [lo, hi]: a per-episode factor on the body's mass         (3D only)  [0.9, 1.1]
@@ -42,6 +43,7 @@ from common.robots import robot_profile
 from common.scenario import RobotProfile, Scenario
 
 Range = tuple[Annotated[float, Field(gt=0.0, le=10.0)], Annotated[float, Field(gt=0.0, le=10.0)]]
+Steps = Annotated[int, Field(ge=0, le=20)]
 ONLY_3D = ("friction", "mass_scale", "control_period")
 ONLY_2D = ("dynamics",)
 
@@ -60,7 +62,7 @@ class Conditions(BaseModel):
     robot: str | dict[str, Any] | None = None
     lidar_noise: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
     odometry_noise: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
-    action_delay: Annotated[int, Field(ge=0, le=20)] | None = None
+    action_delay: Steps | tuple[Steps, Steps] | None = None
     motor_scale: Range | None = None
     friction: Range | None = None
     mass_scale: Range | None = None
@@ -77,10 +79,10 @@ class Conditions(BaseModel):
                 raise ValueError(error.problem) from None
         return value
 
-    @field_validator("motor_scale", "friction", "mass_scale")
+    @field_validator("motor_scale", "friction", "mass_scale", "action_delay")
     @classmethod
-    def _ordered(cls, value: Range | None) -> Range | None:
-        if value is not None and value[0] > value[1]:
+    def _ordered(cls, value: Any) -> Any:
+        if isinstance(value, tuple) and value[0] > value[1]:
             raise ValueError(f"expected [low, high] with low <= high, got {list(value)}")
         return value
 

@@ -54,7 +54,7 @@ class NavigationEnv(gym.Env):
         robot: str | Mapping[str, Any] | None = None,
         lidar_noise: float | None = None,
         odometry_noise: float | None = None,
-        action_delay: int | None = None,
+        action_delay: int | tuple[int, int] | None = None,
         motor_scale: Sequence[float] | None = None,
         friction: Sequence[float] | None = None,
         mass_scale: Sequence[float] | None = None,

@@ -52,7 +52,7 @@ class World:
     actuation conditions of :mod:`common.conditions` (off by default: an ideal robot).
     """
 
-    def __init__(self, scenario: Scenario, seed: int | None = None, action_delay: int = 0,
+    def __init__(self, scenario: Scenario, seed: int | None = None, action_delay: int | tuple[int, int] = 0,
                  motor_scale: tuple[float, float] | None = None, dynamics: str = "kinematic") -> None:
         self.scenario = scenario
         self.rng = np.random.default_rng(seed)

@@ -55,7 +55,7 @@ class World:
 
     def __init__(self, scenario: Scenario, seed: int | None = None, gui: bool = False,
                  control_period: float | None = None, camera: bool = False,
-                 imu_noise: tuple[float, float] = IMU_NOISE, action_delay: int = 0,
+                 imu_noise: tuple[float, float] = IMU_NOISE, action_delay: int | tuple[int, int] = 0,
                  motor_scale: tuple[float, float] | None = None, friction: tuple[float, float] | None = None,
                  mass_scale: tuple[float, float] | None = None) -> None:
         if gui and sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):

@@ -33,6 +33,22 @@ def test_action_delay_holds_each_command_back_by_whole_steps():
     np.testing.assert_allclose(late[1:], now[:-1])
 
 
+@pytest.mark.parametrize("tier", ["flatland", "physics3d"])
+def test_an_action_delay_range_draws_whole_steps_per_episode_and_replays_under_a_seed(tier):
+    world = make_world(tier, OPEN, conditions=Conditions(action_delay=(0, 2), motor_scale=None, odometry_noise=0.0))
+
+    def delay(seed: int) -> int:
+        world.reset(seed=seed)
+        # The command moves the robot only once it has come through the pipeline.
+        return next(step for step in range(4) if world.step(0.5, 0.0).velocity[0] > 0.1)
+
+    delays = [delay(seed) for seed in range(12)]
+    assert set(delays) == {0, 1, 2}
+    assert [delay(seed) for seed in range(12)] == delays
+    with pytest.raises(ConfigError, match=r"env_kwargs.action_delay: .*low <= high"):
+        Conditions.parse({"action_delay": [2, 1]})
+
+
 def test_lidar_noise_has_the_asked_spread_and_replays_under_a_seed():
     wall = SegmentObstacle(points=[(4.0, 0.0), (4.0, 10.0)])
     scenario = OPEN.model_copy(update={"obstacles": [wall], "lidar": LidarSpec(beams=720, range_max=20.0)})
