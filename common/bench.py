@@ -145,15 +145,17 @@ def irsim_circle_world_figures(steps: int) -> dict[str, Any]:
             "circles_flatland_vs_irsim": None if theirs is None else round(flat / theirs, 1)}
 
 
-def ppo_steps_per_s(kind: str, steps: int = 16_384, seed: int = 0) -> tuple[float, float]:
+def ppo_steps_per_s(kind: str, steps: int = 16_384, seed: int = 0, vec_env: str = "dummy") -> tuple[float, float]:
     """PPO's training throughput (env steps per second, learner included) with the main job's
     settings (8 envs, n_steps 256, batch 256, 5 epochs, lidar43_log) on a generator kind, and the
     share of that time spent collecting rollouts (the envs and the policy's forward passes)
-    rather than in gradient updates."""
+    rather than in gradient updates. ``vec_env``: ``dummy`` (one process) or ``subproc`` (one
+    process per env), as a stage's ``vec_env``."""
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.logger import Logger
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     from flatland.env import NavEnv
 
@@ -161,7 +163,8 @@ def ppo_steps_per_s(kind: str, steps: int = 16_384, seed: int = 0) -> tuple[floa
     torch.set_num_threads(1)
     try:
         env = make_vec_env(NavEnv, n_envs=8, seed=seed, env_kwargs={"world": kind, "observation": "lidar43_log",
-                                                                  "max_steps": 300})
+                                                                  "max_steps": 300},
+                           vec_env_cls=SubprocVecEnv if vec_env == "subproc" else DummyVecEnv)
         model = PPO("MlpPolicy", env, n_steps=256, batch_size=256, n_epochs=5, seed=seed, device="cpu")
         model.set_logger(Logger(folder=None, output_formats=[]))  # else SB3 leaves an empty /tmp/SB3-* folder
         model.learn(2048)  # warm-up: the first rollout also compiles numba kernels
@@ -170,7 +173,9 @@ def ppo_steps_per_s(kind: str, steps: int = 16_384, seed: int = 0) -> tuple[floa
             setattr(model, name, _timed(getattr(model, name), spent, name))
         start = time.perf_counter()
         model.learn(steps, reset_num_timesteps=False)
-        return steps / (time.perf_counter() - start), spent["collect_rollouts"] / sum(spent.values())
+        seconds = time.perf_counter() - start
+        env.close()
+        return steps / seconds, spent["collect_rollouts"] / sum(spent.values())
     finally:
         torch.set_num_threads(threads)
 
@@ -385,6 +390,8 @@ def _timed(method, spent: dict[str, float], name: str):
 
 def _ppo_figures(steps: int) -> dict[str, float]:
     (sparse, sparse_share), (cluttered, cluttered_share) = ppo_steps_per_s("sparse", steps), ppo_steps_per_s("cluttered", steps)
+    subproc, _ = ppo_steps_per_s("cluttered", steps, vec_env="subproc")
     return {"ppo_steps_per_s_sparse": round(sparse, 1), "ppo_steps_per_s_cluttered": round(cluttered, 1),
             "ppo_cluttered_vs_sparse": round(cluttered / sparse, 3),
+            "ppo_steps_per_s_cluttered_subproc": round(subproc, 1), "ppo_subproc_vs_dummy": round(subproc / cluttered, 3),
             "ppo_rollout_share_sparse": round(sparse_share, 3), "ppo_rollout_share_cluttered": round(cluttered_share, 3)}
