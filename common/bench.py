@@ -155,16 +155,15 @@ def ppo_steps_per_s(kind: str, steps: int = 16_384, seed: int = 0, vec_env: str 
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.logger import Logger
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
+    from common.curriculum.policy import vec_env_class
     from flatland.env import NavEnv
 
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
+    env = make_vec_env(NavEnv, n_envs=8, seed=seed, env_kwargs={"world": kind, "observation": "lidar43_log",
+                                                              "max_steps": 300}, vec_env_cls=vec_env_class(vec_env))
     try:
-        env = make_vec_env(NavEnv, n_envs=8, seed=seed, env_kwargs={"world": kind, "observation": "lidar43_log",
-                                                                  "max_steps": 300},
-                           vec_env_cls=SubprocVecEnv if vec_env == "subproc" else DummyVecEnv)
         model = PPO("MlpPolicy", env, n_steps=256, batch_size=256, n_epochs=5, seed=seed, device="cpu")
         model.set_logger(Logger(folder=None, output_formats=[]))  # else SB3 leaves an empty /tmp/SB3-* folder
         model.learn(2048)  # warm-up: the first rollout also compiles numba kernels
@@ -173,10 +172,9 @@ def ppo_steps_per_s(kind: str, steps: int = 16_384, seed: int = 0, vec_env: str 
             setattr(model, name, _timed(getattr(model, name), spent, name))
         start = time.perf_counter()
         model.learn(steps, reset_num_timesteps=False)
-        seconds = time.perf_counter() - start
-        env.close()
-        return steps / seconds, spent["collect_rollouts"] / sum(spent.values())
+        return steps / (time.perf_counter() - start), spent["collect_rollouts"] / sum(spent.values())
     finally:
+        env.close()  # a subproc env's worker processes end here, even if training failed
         torch.set_num_threads(threads)
 
 

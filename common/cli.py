@@ -106,10 +106,8 @@ def _policies(paths):
 def _bench(args: argparse.Namespace) -> int:
     from common.bench import gui_figures, run_benchmarks
 
-    if args.gui:
-        results = gui_figures(steps=args.steps or 300)
-    else:
-        results = run_benchmarks(steps=args.steps or 20_000)
+    measure = gui_figures if args.gui else run_benchmarks
+    results = measure(steps=args.steps) if args.steps else measure()  # each has its own default
     if args.json:
         print(json.dumps(results))
         return 0

@@ -35,7 +35,7 @@ def test_action_delay_holds_each_command_back_by_whole_steps():
 
 @pytest.mark.parametrize("tier", ["flatland", "physics3d"])
 def test_an_action_delay_range_draws_whole_steps_per_episode_and_replays_under_a_seed(tier):
-    world = make_world(tier, OPEN, conditions=Conditions(action_delay=(0, 2), motor_scale=None, odometry_noise=0.0))
+    world = make_world(tier, OPEN, conditions=Conditions(action_delay=(0, 2), odometry_noise=0.0))
 
     def delay(seed: int) -> int:
         world.reset(seed=seed)
@@ -45,8 +45,12 @@ def test_an_action_delay_range_draws_whole_steps_per_episode_and_replays_under_a
     delays = [delay(seed) for seed in range(12)]
     assert set(delays) == {0, 1, 2}
     assert [delay(seed) for seed in range(12)] == delays
-    with pytest.raises(ConfigError, match=r"env_kwargs.action_delay: .*low <= high"):
-        Conditions.parse({"action_delay": [2, 1]})
+
+
+@pytest.mark.parametrize("knob", ["action_delay", "motor_scale", "friction", "mass_scale"])
+def test_a_range_runs_from_low_to_high(knob):
+    with pytest.raises(ConfigError, match=rf"env_kwargs.{knob}: expected \[low, high\] with low <= high, got \[2(\.0)?, 1(\.0)?\]"):
+        Conditions.parse({knob: [2, 1]})
 
 
 def test_lidar_noise_has_the_asked_spread_and_replays_under_a_seed():

@@ -31,6 +31,14 @@ def algorithm_class(name: str):
     return {"ppo": PPO, "sac": SAC, "td3": TD3}[name]
 
 
+def vec_env_class(name: str):
+    """The stable-baselines3 VecEnv class of a stage's ``vec_env``: ``dummy`` (the envs in this
+    process) or ``subproc`` (a process per env)."""
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    return {"dummy": DummyVecEnv, "subproc": SubprocVecEnv}[name]
+
+
 def observation_space(manifest: Manifest):
     """The Box a policy of this manifest reads (its shape depends on the layout alone)."""
     return make_layout(manifest.observation, RobotProfile(), LidarSpec(), manifest.goal_distance_scale).space

@@ -39,7 +39,7 @@ from filelock import FileLock, Timeout
 import common
 from common.atomic import atomic_write
 from common.curriculum.hyperparams import resolve_hyperparams
-from common.curriculum.policy import PolicyAgent, algorithm_class, load_weights
+from common.curriculum.policy import PolicyAgent, algorithm_class, load_weights, vec_env_class
 from common.curriculum.policy_file import Normalizer, update_manifest
 from common.curriculum.replay import load_replay
 from common.conditions import conditions_of
@@ -283,7 +283,7 @@ class Runner:
     def _run_stage(self, index: int, stage: StageSpec, state: dict) -> dict:
         import torch
         from stable_baselines3.common.env_util import make_vec_env
-        from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
+        from stable_baselines3.common.vec_env import VecNormalize
 
         from common.curriculum.training import CurriculumCallback
 
@@ -292,7 +292,7 @@ class Runner:
         paths = self.stage_paths(index, stage)
         seed = self.config.seed + index
         venv = make_vec_env(_env_class(stage), n_envs=stage.n_envs, seed=seed, env_kwargs=_make_env_kwargs(stage),
-                            vec_env_cls=SubprocVecEnv if stage.vec_env == "subproc" else DummyVecEnv)
+                            vec_env_cls=vec_env_class(stage.vec_env))
         resuming = self.resume and paths.last.exists()
         if stage.normalize:
             venv = VecNormalize(venv, norm_obs=True, norm_reward=False)
