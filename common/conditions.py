@@ -44,13 +44,14 @@ from common.scenario import RobotProfile, Scenario
 
 Range = tuple[Annotated[float, Field(gt=0.0, le=10.0)], Annotated[float, Field(gt=0.0, le=10.0)]]
 Steps = Annotated[int, Field(ge=0, le=20)]
-ONLY_3D = ("friction", "mass_scale", "control_period")
+ONLY_3D = ("friction", "mass_scale", "control_period", "heading_source", "gyro_noise", "gyro_bias")
 ONLY_2D = ("dynamics",)
 
 TIER_DEFAULTS: dict[str, dict[str, Any]] = {
     "flatland": {"action_delay": 0, "dynamics": "kinematic"},
     "physics3d": {"robot": "physics3d", "lidar_noise": 0.01, "odometry_noise": 0.01, "action_delay": 0,
-                  "motor_scale": (0.95, 1.05), "friction": (0.8, 1.2), "mass_scale": (0.9, 1.1)},
+                  "motor_scale": (0.95, 1.05), "friction": (0.8, 1.2), "mass_scale": (0.9, 1.1),
+                  "heading_source": "gyro", "gyro_noise": 0.005, "gyro_bias": 0.0005},
 }
 
 
@@ -68,6 +69,9 @@ class Conditions(BaseModel):
     mass_scale: Range | None = None
     control_period: Annotated[float, Field(gt=0.0, le=10.0)] | None = None
     dynamics: Literal["kinematic", "first_order"] | None = None
+    heading_source: Literal["wheels", "gyro"] | None = None
+    gyro_noise: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
+    gyro_bias: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
 
     @field_validator("robot")
     @classmethod
@@ -137,7 +141,10 @@ class Conditions(BaseModel):
         if tier == "flatland":
             kwargs["dynamics"] = self.dynamics or "kinematic"
         else:
-            kwargs.update(friction=self.friction, mass_scale=self.mass_scale, control_period=self.control_period)
+            kwargs.update(friction=self.friction, mass_scale=self.mass_scale, control_period=self.control_period,
+                          heading_source=self.heading_source or "wheels", gyro_bias=self.gyro_bias or 0.0)
+            if self.gyro_noise is not None:
+                kwargs["gyro_noise"] = self.gyro_noise
         return kwargs
 
 

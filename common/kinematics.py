@@ -104,12 +104,20 @@ class WheelOdometry:
         self.v = 0.0
         self.w = 0.0
 
-    def update(self, left: float, right: float, dt: float) -> Pose2D:
-        """Integrate one period of true wheel speeds (rad/s); return the estimated pose."""
+    def update(self, left: float, right: float, dt: float, turned: float | None = None) -> Pose2D:
+        """Integrate one period of true wheel speeds (rad/s); return the estimated pose.
+
+        ``turned``: the heading change over the period as another sensor measured it (a gyroscope);
+        given, it replaces the wheels' turn and the wheels supply only the speed. Heading is where
+        dead reckoning drifts most: a wheel's error turns the robot, and the turn carries every
+        later metre off course.
+        """
         if self.noise > 0.0:
             slip = self.rng.normal(0.0, self.noise, 2)
             left *= 1.0 + slip[0]
             right *= 1.0 + slip[1]
         self.v, self.w = body_velocity(left, right, self.wheel_radius, self.wheel_base)
+        if turned is not None:
+            self.w = turned / dt
         self.pose = self.integrate(self.pose, self.v, self.w, dt)
         return self.pose

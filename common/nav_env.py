@@ -60,13 +60,16 @@ class NavigationEnv(gym.Env):
         mass_scale: Sequence[float] | None = None,
         control_period: float | None = None,
         dynamics: str | None = None,
+        heading_source: str | None = None,
+        gyro_noise: float | None = None,
+        gyro_bias: float | None = None,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode {render_mode!r}; allowed: None, {', '.join(self.metadata['render_modes'])}")
         self.render_mode = render_mode
         given = dict(robot=robot, lidar_noise=lidar_noise, odometry_noise=odometry_noise, action_delay=action_delay,
                      motor_scale=motor_scale, friction=friction, mass_scale=mass_scale, control_period=control_period,
-                     dynamics=dynamics)
+                     dynamics=dynamics, heading_source=heading_source, gyro_noise=gyro_noise, gyro_bias=gyro_bias)
         self.conditions = Conditions.parse({k: v for k, v in given.items() if v is not None}).for_tier(self.tier)
         if self.conditions.profile is not None:
             # Generated scenarios leave gaps sized for the robot that will drive them.

@@ -116,20 +116,32 @@ def _rotate_into(q: Quaternion, v: Vector) -> tuple[float, float, float]:
 
 class Imu:
     """An IMU at the base's centre of mass: accelerometer (specific force, so gravity reads +9.81
-    m/s² up at rest) and gyroscope, in the body frame, each axis with Gaussian noise.
+    m/s² up at rest) and gyroscope, in the body frame, each axis with Gaussian noise; the gyroscope
+    also carries a bias per axis, drawn per episode with spread ``gyro_bias``.
 
     The acceleration is the change of the base's velocity over the last control period: what a
-    real IMU averaged over that period would report.
+    real IMU averaged over that period would report. :meth:`turned` is the gyroscope's yaw rate
+    integrated over the period, as IMU drivers integrate their high-rate samples.
     """
 
-    def __init__(self, rng: np.random.Generator, accel_noise: float = 0.0, gyro_noise: float = 0.0) -> None:
+    def __init__(self, rng: np.random.Generator, accel_noise: float = 0.0, gyro_noise: float = 0.0,
+                 gyro_bias: float = 0.0) -> None:
         self.rng = rng
-        self.accel_noise, self.gyro_noise = accel_noise, gyro_noise
+        self.accel_noise, self.gyro_noise, self.gyro_bias = accel_noise, gyro_noise, gyro_bias
+        self.bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self._previous: Vector = (0.0, 0.0, 0.0)
 
     def reset(self, velocity: Vector = (0.0, 0.0, 0.0)) -> None:
-        """Forget the last velocity (the robot starts at rest)."""
+        """Forget the last velocity (the robot starts at rest); draw this episode's gyro bias."""
         self._previous = velocity
+        if self.gyro_bias > 0.0:
+            self.bias = tuple(self.rng.normal(0.0, self.gyro_bias, 3).tolist())
+
+    def turned(self, yaw_change: float, dt: float) -> float:
+        """The yaw change (rad) the gyroscope measured over a period ``dt`` in which the body turned
+        by ``yaw_change``: its mean rate carries the bias and one reading's noise."""
+        noise = self.rng.normal(0.0, self.gyro_noise) if self.gyro_noise > 0.0 else 0.0
+        return yaw_change + (self.bias[2] + noise) * dt
 
     def read(self, orientation: Quaternion, velocity: Vector, angular_velocity: Vector, dt: float) -> ImuReading:
         """The reading after a period ``dt`` that ended with these base orientation and velocities."""
@@ -142,4 +154,6 @@ class Imu:
             noise = self.rng.normal(0.0, 1.0, 6).tolist()
             accel = tuple(a + self.accel_noise * n for a, n in zip(accel, noise[:3]))
             gyro = tuple(g + self.gyro_noise * n for g, n in zip(gyro, noise[3:]))
+        if self.gyro_bias > 0.0:
+            gyro = tuple(g + b for g, b in zip(gyro, self.bias))
         return ImuReading(accel, gyro)

@@ -16,7 +16,7 @@ import numpy as np
 import pybullet as p
 
 from common.actuation import Actuator
-from common.kinematics import Pose2D, WheelOdometry, unicycle_exact
+from common.kinematics import Pose2D, WheelOdometry, unicycle_exact, wrap_angle
 from common.readings import Odometry, Readings, frozen
 from common.scenario import Scenario
 from physics3d.robot import ROBOT_COLLISION_GROUP, WHEEL_BASE, WHEEL_RADIUS, Robot, yaw_of
@@ -31,7 +31,7 @@ SETTLE_SUBSTEPS = 24  # at build: let the robot sink into its contacts before th
 # A contact point nearer than this counts as touching. Bullet keeps manifold points until they
 # separate by 2 cm, so a robot that has just slid past a box still lists it for a few sub-steps.
 TOUCH_DISTANCE = 1e-3  # m
-IMU_NOISE = (0.05, 0.005)  # default standard deviations: m/s² per accelerometer axis, rad/s per gyro axis
+HEADING_SOURCES = ("wheels", "gyro")
 
 
 class World:
@@ -43,7 +43,11 @@ class World:
         gui: open PyBullet's GUI instead of the headless DIRECT client (one per process).
         control_period: seconds per :meth:`step` (default ``scenario.world.step_time``).
         camera: also render the robot's camera into ``Readings.camera`` every step.
-        imu_noise: standard deviations of the accelerometer (m/s²) and gyroscope (rad/s) noise.
+        accel_noise, gyro_noise: standard deviations of the accelerometer's (m/s²) and the
+            gyroscope's (rad/s) noise on each axis.
+        gyro_bias: spread (rad/s) of the gyroscope's bias, drawn per episode.
+        heading_source: where the odometry's heading comes from: ``"wheels"`` (dead reckoning
+            alone) or ``"gyro"`` (the IMU's integrated yaw rate; the wheels give the speed).
         action_delay, motor_scale, friction, mass_scale: the conditions of :mod:`common.conditions`
             (none by default here; the env applies physics3d's realistic defaults). Ranges are
             drawn at every reset from the world's generator.
@@ -55,7 +59,8 @@ class World:
 
     def __init__(self, scenario: Scenario, seed: int | None = None, gui: bool = False,
                  control_period: float | None = None, camera: bool = False,
-                 imu_noise: tuple[float, float] = IMU_NOISE, action_delay: int | tuple[int, int] = 0,
+                 accel_noise: float = 0.05, gyro_noise: float = 0.005, gyro_bias: float = 0.0, heading_source: str = "wheels",
+                 action_delay: int | tuple[int, int] = 0,
                  motor_scale: tuple[float, float] | None = None, friction: tuple[float, float] | None = None,
                  mass_scale: tuple[float, float] | None = None) -> None:
         if gui and sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
@@ -67,7 +72,10 @@ class World:
         self.substeps = max(1, round(period * PHYSICS_HZ))
         self.period = self.substeps / PHYSICS_HZ
         self.rng = np.random.default_rng(seed)
-        self.imu_noise = imu_noise
+        if heading_source not in HEADING_SOURCES:
+            raise ValueError(f"heading_source must be one of {HEADING_SOURCES}, got {heading_source!r}")
+        self.imu_noise = (accel_noise, gyro_noise, gyro_bias)
+        self.gyro_heading = heading_source == "gyro"
         self.actuator = Actuator(action_delay, motor_scale)
         self.friction_range, self.mass_range = friction, mass_scale
         renderer = p.ER_BULLET_HARDWARE_OPENGL if gui else p.ER_TINY_RENDERER
@@ -121,7 +129,9 @@ class World:
         self.robot.drive(0.0, 0.0)
         self.steps = 0
         self._angles = self.robot.wheel_angles()
-        self.odometry.reset(self.pose())
+        start = self.pose()
+        self._yaw = start.yaw
+        self.odometry.reset(start)
         self.imu.reset()
         self.readings = self._read(0.0, bool(self.touching()))
         return self.readings
@@ -168,8 +178,9 @@ class World:
         linear, angular = self.robot.velocity()
         if dt > 0.0:
             left, right = self.robot.wheel_angles()
-            self.odometry.update((left - self._angles[0]) / dt, (right - self._angles[1]) / dt, dt)
-            self._angles = (left, right)
+            turned = self.imu.turned(wrap_angle(yaw - self._yaw), dt) if self.gyro_heading else None
+            self.odometry.update((left - self._angles[0]) / dt, (right - self._angles[1]) / dt, dt, turned)
+            self._angles, self._yaw = (left, right), yaw
         camera = None
         if self.camera is not None:
             camera = {key: frozen(image) for key, image in self.camera.from_mount(*self.robot.camera_pose()).items()}

@@ -99,6 +99,8 @@ def test_the_robot_knob_swaps_the_profile_and_noise_knobs_reach_the_scenario():
 def test_each_tier_refuses_the_other_tiers_knobs():
     with pytest.raises(ConfigError, match="friction: not a flatland knob"):
         gym.make("flatland/Nav-v0", friction=(0.8, 1.2))
+    with pytest.raises(ConfigError, match="heading_source: not a flatland knob"):
+        gym.make("flatland/Nav-v0", heading_source="gyro")
     with pytest.raises(ConfigError, match="dynamics: not a physics3d knob"):
         gym.make("physics3d/WarehouseNav-v0", world="open", dynamics="first_order")
 
@@ -108,6 +110,8 @@ def test_physics3d_defaults_are_the_realistic_ones():
     conditions = env.unwrapped.conditions
     assert conditions.robot == "physics3d" and conditions.lidar_noise == 0.01 and conditions.odometry_noise == 0.01
     assert conditions.motor_scale == (0.95, 1.05) and conditions.friction == (0.8, 1.2) and conditions.mass_scale == (0.9, 1.1)
+    world = env.unwrapped.world
+    assert world.gyro_heading and world.imu.gyro_noise == 0.005 and world.imu.gyro_bias == 0.0005
     assert gym.make("flatland/Nav-v0").unwrapped.conditions.lidar_noise is None  # flatland: ideal unless asked
     env.close()
 
@@ -133,3 +137,10 @@ def test_a_heavier_slipperier_3d_robot_accelerates_less():
     heavy = make_world("physics3d", OPEN, conditions=Conditions(motor_scale=(1, 1), friction=(0.3, 0.3), mass_scale=(3, 3)))
     far = [_xs(world, [(0.5, 0.0)] * 5)[-1] for world in (plain, heavy)]
     assert far[1] < far[0] - 0.02
+
+
+def test_the_heading_and_gyro_knobs_reach_the_3d_world():
+    env = gym.make("physics3d/WarehouseNav-v0", world="open", heading_source="wheels", gyro_noise=0.02, gyro_bias=0.01)
+    world = env.unwrapped.world
+    assert not world.gyro_heading and world.imu.gyro_noise == 0.02 and world.imu.gyro_bias == 0.01
+    env.close()

@@ -224,3 +224,17 @@ def test_odometry_same_seed_same_drift():
     other, _ = drive(make_odometry(0.1, seed=43), cmds)
     assert first == second
     assert first != other
+
+
+def test_a_measured_turn_replaces_the_wheels_heading_and_keeps_their_speed():
+    cmds = commands(6)
+    odometry = make_odometry(0.2, seed=1)  # encoders so noisy that their own heading is far off
+    start = Pose2D(1.0, 2.0, 0.5)
+    odometry.reset(start)
+    yaw = start.yaw
+    for v, w in cmds:
+        odometry.update(*wheel_speeds(v, w, odometry.wheel_radius, odometry.wheel_base), 0.1, turned=w * 0.1)
+        yaw += w * 0.1
+    assert odometry.pose.yaw == pytest.approx(math.remainder(yaw, 2.0 * math.pi), abs=1e-9)
+    assert odometry.w == pytest.approx(cmds[-1][1])
+    assert odometry.v != pytest.approx(cmds[-1][0], abs=1e-6)  # the speed is still the noisy wheels'

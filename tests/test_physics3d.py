@@ -25,6 +25,7 @@ from common.controllers import make_controller
 from common.curriculum.policy_file import save_policy
 from common.evaluation import run_episode
 from common.generators import generate
+from common.kinematics import wrap_angle
 from tests.conftest import missing
 from tests.rollouts import rollout, same
 from common.scenario import BoxObstacle, CircleObstacle, LidarSpec, PolygonObstacle, Scenario, SegmentObstacle
@@ -170,7 +171,7 @@ def test_camera_images_have_their_shapes_and_depth_in_metres():
 
 
 def test_imu_reads_gravity_at_rest_with_the_specified_noise():
-    world = World(OPEN, seed=0, imu_noise=(0.1, 0.02))
+    world = World(OPEN, seed=0, accel_noise=0.1, gyro_noise=0.02)
     world.reset(seed=0)
     imu = [world.step(0.0, 0.0).imu for _ in range(300)]
     accel = np.array([r.linear_acceleration for r in imu])
@@ -182,7 +183,7 @@ def test_imu_reads_gravity_at_rest_with_the_specified_noise():
 
 
 def test_imu_measures_turn_rate_and_centripetal_acceleration():
-    world = World(OPEN, imu_noise=(0.0, 0.0))
+    world = World(OPEN, accel_noise=0.0, gyro_noise=0.0)
     world.reset()
     for _ in range(15):
         world.step(0.4, 1.0)
@@ -466,3 +467,41 @@ def test_human_render_opens_the_gui_under_xvfb():
     finally:
         server.terminate()
         server.wait(timeout=10)
+
+
+def _heading_error(heading_source: str, seed: int, **imu) -> float:
+    world = World(scenario(robot=ROBOT_PROFILE.model_copy(update={"encoder_noise": 0.05})),
+                  heading_source=heading_source, **imu)
+    readings = world.reset(seed=seed)
+    for k in range(120):
+        readings = world.step(0.4, 0.6 * math.sin(0.05 * k))
+    world.close()
+    return abs(wrap_angle(readings.pose.yaw - readings.odometry.pose.yaw))
+
+
+def test_gyro_heading_holds_where_wheel_heading_drifts():
+    wheels = np.mean([_heading_error("wheels", seed) for seed in range(3)])
+    gyro = np.mean([_heading_error("gyro", seed, gyro_noise=0.0, gyro_bias=0.0) for seed in range(3)])
+    assert wheels > 0.05  # 5% encoder noise over 4.8 m turns the estimate by degrees
+    assert gyro < 1e-6  # a perfect gyro integrated over each period is the true turn
+
+
+def test_the_gyro_bias_is_drawn_per_episode_and_turns_the_estimate_at_rest():
+    world = World(OPEN, gyro_noise=0.0, gyro_bias=0.05, heading_source="gyro")
+
+    def drift(seed: int) -> tuple[float, float]:
+        start = world.reset(seed=seed).odometry.pose.yaw
+        readings = [world.step(0.0, 0.0) for _ in range(20)]
+        rates = [r.imu.angular_velocity[2] for r in readings]
+        return wrap_angle(readings[-1].odometry.pose.yaw - start), float(np.mean(rates))
+
+    draws = [drift(seed) for seed in range(4)]
+    for turned, rate in draws:
+        assert turned == pytest.approx(rate * 2.0, abs=1e-3)  # 2 s standing still: the bias, integrated
+    assert len({round(rate, 6) for _, rate in draws}) == 4 and drift(1) == draws[1]
+    world.close()
+
+
+def test_an_unknown_heading_source_is_refused():
+    with pytest.raises(ValueError, match="heading_source must be one of"):
+        World(OPEN, heading_source="compass")
