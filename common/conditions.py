@@ -23,13 +23,22 @@ knob               meaning                                                  flat
 ``control_period`` seconds per step (default the scenario's step_time)       (3D only)  step_time
 ``dynamics``       ``kinematic`` or ``first_order`` (wheel lag and           kinematic  (2D only)
                    acceleration limits fitted to the 3D robot)
+``heading_source`` where the odometry's heading comes from: ``wheels``       (3D only)  ``gyro``
+                   or ``gyro`` (the wheels still give the speed)
+``gyro_noise``     σ of each gyroscope reading, rad/s                        (3D only)  0.005
+``gyro_bias``      σ of the gyroscope's bias, drawn per episode, rad/s       (3D only)  0.0005
 =================  ======================================================  =========  ===========
 
 Why these physics3d defaults: a 2D lidar of the RPLIDAR class measures to about 1 % (1 cm at 1 m);
 wheel encoders with tyre slip err by about 1 % per wheel; motors and wheel radii vary by a few
 per cent between units and with battery charge; a warehouse floor's friction with rubber tyres
 lies around 0.8-1.2; a payload changes the mass by about a tenth. A policy that sees only a
-perfect robot learns to rely on perfection (the 3D tutorial's own warning).
+perfect robot learns to rely on perfection (the 3D tutorial's own warning). Small robots with an
+IMU take their odometry's heading from its gyroscope, because heading is where dead reckoning
+drifts most (a wheel's error turns the estimate, and the turn carries every later metre off
+course); a MEMS gyro re-zeroed while the robot stands at its start keeps a bias of a few hundredths
+of a degree per second (0.0005 rad/s is about 100°/h, several times the bias instability of
+consumer parts), and 0.005 rad/s of noise per reading.
 """
 
 from __future__ import annotations
@@ -44,6 +53,7 @@ from common.scenario import RobotProfile, Scenario
 
 Range = tuple[Annotated[float, Field(gt=0.0, le=10.0)], Annotated[float, Field(gt=0.0, le=10.0)]]
 Steps = Annotated[int, Field(ge=0, le=20)]
+HeadingSource = Literal["wheels", "gyro"]
 ONLY_3D = ("friction", "mass_scale", "control_period", "heading_source", "gyro_noise", "gyro_bias")
 ONLY_2D = ("dynamics",)
 
@@ -69,7 +79,7 @@ class Conditions(BaseModel):
     mass_scale: Range | None = None
     control_period: Annotated[float, Field(gt=0.0, le=10.0)] | None = None
     dynamics: Literal["kinematic", "first_order"] | None = None
-    heading_source: Literal["wheels", "gyro"] | None = None
+    heading_source: HeadingSource | None = None
     gyro_noise: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
     gyro_bias: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
 
@@ -141,10 +151,9 @@ class Conditions(BaseModel):
         if tier == "flatland":
             kwargs["dynamics"] = self.dynamics or "kinematic"
         else:
-            kwargs.update(friction=self.friction, mass_scale=self.mass_scale, control_period=self.control_period,
-                          heading_source=self.heading_source or "wheels", gyro_bias=self.gyro_bias or 0.0)
-            if self.gyro_noise is not None:
-                kwargs["gyro_noise"] = self.gyro_noise
+            kwargs.update(friction=self.friction, mass_scale=self.mass_scale, control_period=self.control_period)
+            kwargs.update({knob: getattr(self, knob) for knob in ("heading_source", "gyro_noise", "gyro_bias")
+                           if getattr(self, knob) is not None})
         return kwargs
 
 

@@ -68,7 +68,8 @@ def body_velocity(
 
 
 class WheelOdometry:
-    """Dead reckoning from wheel encoders, with multiplicative Gaussian encoder noise.
+    """Dead reckoning from wheel encoders, with multiplicative Gaussian encoder noise; the heading
+    may come from a gyroscope instead (``update(..., turned=...)``).
 
     Each step the true wheel rotations are scaled by ``1 + N(0, noise)`` (a slip-like error, so the
     drift grows with the distance travelled) and integrated.
@@ -118,6 +119,6 @@ class WheelOdometry:
             right *= 1.0 + slip[1]
         self.v, self.w = body_velocity(left, right, self.wheel_radius, self.wheel_base)
         if turned is not None:
-            self.w = turned / dt
+            self.w = turned / dt if dt > 0.0 else 0.0
         self.pose = self.integrate(self.pose, self.v, self.w, dt)
         return self.pose

@@ -16,7 +16,7 @@ from common.kinematics import wrap_angle
 from common.observations import DEFAULT_GOAL_DISTANCE_SCALE, make_layout
 from common.readings import Readings
 from common.rewards import Reward, StepContext
-from common.conditions import Conditions
+from common.conditions import Conditions, HeadingSource
 from common.errors import ConfigError, quote
 from common.scenario import MAX_LENGTH, Scenario
 from common.sources import ScenarioSource, scenario_source
@@ -60,7 +60,7 @@ class NavigationEnv(gym.Env):
         mass_scale: Sequence[float] | None = None,
         control_period: float | None = None,
         dynamics: str | None = None,
-        heading_source: str | None = None,
+        heading_source: HeadingSource | None = None,
         gyro_noise: float | None = None,
         gyro_bias: float | None = None,
     ) -> None:

@@ -10,7 +10,9 @@ from common.kinematics import Pose2D
 
 
 class Odometry(NamedTuple):
-    """Wheel-odometry estimate: dead-reckoned pose and body velocity (v m/s, w rad/s)."""
+    """Odometry estimate: dead-reckoned pose and body velocity (v m/s, w rad/s). The speed comes
+    from the wheels; the heading and w from the wheels too, or from a gyroscope where the world
+    takes them from one (physics3d's ``heading_source="gyro"``)."""
 
     pose: Pose2D
     v: float
@@ -31,7 +33,7 @@ class Readings(NamedTuple):
     Attributes:
         pose: the true pose (ground truth, for metrics and rewards; controllers use ``odometry``).
         velocity: the true body velocity (v, w) during the last step.
-        odometry: the wheel-odometry estimate.
+        odometry: the odometry estimate (wheels, and in 3D the gyroscope's heading by default).
         lidar: ranges in metres, in the sensor's beam order.
         imu: inertial readings.
         collided: whether the robot touched an obstacle or a wall in the last step.

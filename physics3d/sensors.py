@@ -135,7 +135,8 @@ class Imu:
         """Forget the last velocity (the robot starts at rest); draw this episode's gyro bias."""
         self._previous = velocity
         if self.gyro_bias > 0.0:
-            self.bias = tuple(self.rng.normal(0.0, self.gyro_bias, 3).tolist())
+            x, y, z = self.rng.normal(0.0, self.gyro_bias, 3).tolist()
+            self.bias = (x, y, z)
 
     def turned(self, yaw_change: float, dt: float) -> float:
         """The yaw change (rad) the gyroscope measured over a period ``dt`` in which the body turned

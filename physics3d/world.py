@@ -11,11 +11,13 @@ from __future__ import annotations
 import math
 import os
 import sys
+from typing import get_args
 
 import numpy as np
 import pybullet as p
 
 from common.actuation import Actuator
+from common.conditions import HeadingSource
 from common.kinematics import Pose2D, WheelOdometry, unicycle_exact, wrap_angle
 from common.readings import Odometry, Readings, frozen
 from common.scenario import Scenario
@@ -31,7 +33,6 @@ SETTLE_SUBSTEPS = 24  # at build: let the robot sink into its contacts before th
 # A contact point nearer than this counts as touching. Bullet keeps manifold points until they
 # separate by 2 cm, so a robot that has just slid past a box still lists it for a few sub-steps.
 TOUCH_DISTANCE = 1e-3  # m
-HEADING_SOURCES = ("wheels", "gyro")
 
 
 class World:
@@ -59,7 +60,8 @@ class World:
 
     def __init__(self, scenario: Scenario, seed: int | None = None, gui: bool = False,
                  control_period: float | None = None, camera: bool = False,
-                 accel_noise: float = 0.05, gyro_noise: float = 0.005, gyro_bias: float = 0.0, heading_source: str = "wheels",
+                 accel_noise: float = 0.05, gyro_noise: float = 0.005, gyro_bias: float = 0.0,
+                 heading_source: HeadingSource = "wheels",
                  action_delay: int | tuple[int, int] = 0,
                  motor_scale: tuple[float, float] | None = None, friction: tuple[float, float] | None = None,
                  mass_scale: tuple[float, float] | None = None) -> None:
@@ -72,8 +74,8 @@ class World:
         self.substeps = max(1, round(period * PHYSICS_HZ))
         self.period = self.substeps / PHYSICS_HZ
         self.rng = np.random.default_rng(seed)
-        if heading_source not in HEADING_SOURCES:
-            raise ValueError(f"heading_source must be one of {HEADING_SOURCES}, got {heading_source!r}")
+        if heading_source not in get_args(HeadingSource):
+            raise ValueError(f"heading_source must be one of {get_args(HeadingSource)}, got {heading_source!r}")
         self.imu_noise = (accel_noise, gyro_noise, gyro_bias)
         self.gyro_heading = heading_source == "gyro"
         self.actuator = Actuator(action_delay, motor_scale)
@@ -178,8 +180,10 @@ class World:
         linear, angular = self.robot.velocity()
         if dt > 0.0:
             left, right = self.robot.wheel_angles()
-            turned = self.imu.turned(wrap_angle(yaw - self._yaw), dt) if self.gyro_heading else None
-            self.odometry.update((left - self._angles[0]) / dt, (right - self._angles[1]) / dt, dt, turned)
+            # The gyro is read whichever source the heading takes, so switching it changes no other draw.
+            turned = self.imu.turned(wrap_angle(yaw - self._yaw), dt)
+            self.odometry.update((left - self._angles[0]) / dt, (right - self._angles[1]) / dt, dt,
+                                 turned if self.gyro_heading else None)
             self._angles, self._yaw = (left, right), yaw
         camera = None
         if self.camera is not None:

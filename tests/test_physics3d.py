@@ -197,12 +197,18 @@ def test_imu_measures_turn_rate_and_centripetal_acceleration():
 
 # --- odometry and collisions -------------------------------------------------------------------
 
+def _curving_drive(encoder_noise: float, seed: int, **world) -> list:
+    """The readings of 4.8 m of curving drive on an empty floor."""
+    world = World(scenario(robot=ROBOT_PROFILE.model_copy(update={"encoder_noise": encoder_noise})), **world)
+    readings = [world.reset(seed=seed)]
+    readings += [world.step(0.4, 0.6 * math.sin(0.05 * k)) for k in range(120)]
+    world.close()
+    return readings
+
+
 def _odometry_error(noise: float, seed: int) -> float:
-    world = World(scenario(robot=ROBOT_PROFILE.model_copy(update={"encoder_noise": noise})))
-    readings = world.reset(seed=seed)
-    for k in range(120):
-        readings = world.step(0.4, 0.6 * math.sin(0.05 * k))
-    return math.dist(readings.pose[:2], readings.odometry.pose[:2])
+    end = _curving_drive(noise, seed)[-1]
+    return math.dist(end.pose[:2], end.odometry.pose[:2])
 
 
 def test_odometry_drift_grows_with_encoder_noise():
@@ -470,20 +476,26 @@ def test_human_render_opens_the_gui_under_xvfb():
 
 
 def _heading_error(heading_source: str, seed: int, **imu) -> float:
-    world = World(scenario(robot=ROBOT_PROFILE.model_copy(update={"encoder_noise": 0.05})),
-                  heading_source=heading_source, **imu)
-    readings = world.reset(seed=seed)
-    for k in range(120):
-        readings = world.step(0.4, 0.6 * math.sin(0.05 * k))
-    world.close()
-    return abs(wrap_angle(readings.pose.yaw - readings.odometry.pose.yaw))
+    end = _curving_drive(0.05, seed, heading_source=heading_source, **imu)[-1]
+    return abs(wrap_angle(end.pose.yaw - end.odometry.pose.yaw))
 
 
 def test_gyro_heading_holds_where_wheel_heading_drifts():
     wheels = np.mean([_heading_error("wheels", seed) for seed in range(3)])
-    gyro = np.mean([_heading_error("gyro", seed, gyro_noise=0.0, gyro_bias=0.0) for seed in range(3)])
+    perfect = np.mean([_heading_error("gyro", seed, gyro_noise=0.0, gyro_bias=0.0) for seed in range(3)])
+    noisy = [_heading_error("gyro", seed, gyro_noise=0.02, gyro_bias=0.002) for seed in range(3)]
     assert wheels > 0.05  # 5% encoder noise over 4.8 m turns the estimate by degrees
-    assert gyro < 1e-6  # a perfect gyro integrated over each period is the true turn
+    assert perfect < 1e-6  # a perfect gyro integrated over each period is the true turn
+    assert 0.0 < np.mean(noisy) < wheels / 3  # a noisy, biased gyro still holds the heading better
+    assert _heading_error("gyro", 1, gyro_noise=0.02, gyro_bias=0.002) == noisy[1]
+
+
+def test_the_heading_source_changes_no_other_draw():
+    runs = [_curving_drive(0.05, 0, heading_source=source, gyro_bias=0.01) for source in ("wheels", "gyro")]
+    for wheels, gyro in zip(*runs):
+        np.testing.assert_array_equal(wheels.lidar, gyro.lidar)
+        assert wheels.imu == gyro.imu and wheels.odometry.v == gyro.odometry.v
+    assert runs[0][-1].odometry.pose != runs[1][-1].odometry.pose
 
 
 def test_the_gyro_bias_is_drawn_per_episode_and_turns_the_estimate_at_rest():
