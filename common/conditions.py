@@ -151,9 +151,8 @@ class Conditions(BaseModel):
         if tier == "flatland":
             kwargs["dynamics"] = self.dynamics or "kinematic"
         else:
-            kwargs.update(friction=self.friction, mass_scale=self.mass_scale, control_period=self.control_period)
-            kwargs.update({knob: getattr(self, knob) for knob in ("heading_source", "gyro_noise", "gyro_bias")
-                           if getattr(self, knob) is not None})
+            kwargs.update(friction=self.friction, mass_scale=self.mass_scale, control_period=self.control_period,
+                          heading_source=self.heading_source, gyro_noise=self.gyro_noise, gyro_bias=self.gyro_bias)
         return kwargs
 
 

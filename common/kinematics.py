@@ -110,7 +110,7 @@ class WheelOdometry:
 
         ``turned``: the heading change over the period as another sensor measured it (a gyroscope);
         given, it replaces the wheels' turn and the wheels supply only the speed. Heading is where
-        dead reckoning drifts most: a wheel's error turns the robot, and the turn carries every
+        dead reckoning drifts most: a wheel's error turns the estimate, and the turn carries every
         later metre off course.
         """
         if self.noise > 0.0:

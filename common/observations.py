@@ -1,7 +1,8 @@
 """Observation layouts: readings + goal -> a normalised float32 vector, the same in both tiers.
 
-Both layouts read what a real robot has: the odometry pose and velocity, the lidar and the IMU. Every entry is scaled by a property of the robot or sensor (v_max, w_max, range_max) or by a
-fixed distance scale, never by the world's size, so a policy trained in one world reads another.
+Both layouts read what a real robot has: the odometry pose and velocity, the lidar and the IMU.
+Every entry is scaled by a property of the robot or sensor (v_max, w_max, range_max) or by a fixed
+distance scale, never by the world's size, so a policy trained in one world reads another.
 
 ``nav7`` (the 2D tutorial's layout):
 

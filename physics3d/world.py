@@ -17,7 +17,7 @@ import numpy as np
 import pybullet as p
 
 from common.actuation import Actuator
-from common.conditions import HeadingSource
+from common.conditions import TIER_DEFAULTS, HeadingSource
 from common.kinematics import Pose2D, WheelOdometry, unicycle_exact, wrap_angle
 from common.readings import Odometry, Readings, frozen
 from common.scenario import Scenario
@@ -60,7 +60,8 @@ class World:
 
     def __init__(self, scenario: Scenario, seed: int | None = None, gui: bool = False,
                  control_period: float | None = None, camera: bool = False,
-                 accel_noise: float = 0.05, gyro_noise: float = 0.005, gyro_bias: float = 0.0,
+                 accel_noise: float = 0.05, gyro_noise: float = TIER_DEFAULTS["physics3d"]["gyro_noise"],
+                 gyro_bias: float = 0.0,
                  heading_source: HeadingSource = "wheels",
                  action_delay: int | tuple[int, int] = 0,
                  motor_scale: tuple[float, float] | None = None, friction: tuple[float, float] | None = None,
@@ -76,7 +77,7 @@ class World:
         self.rng = np.random.default_rng(seed)
         if heading_source not in get_args(HeadingSource):
             raise ValueError(f"heading_source must be one of {get_args(HeadingSource)}, got {heading_source!r}")
-        self.imu_noise = (accel_noise, gyro_noise, gyro_bias)
+        self.imu_spec = (accel_noise, gyro_noise, gyro_bias)
         self.gyro_heading = heading_source == "gyro"
         self.actuator = Actuator(action_delay, motor_scale)
         self.friction_range, self.mass_range = friction, mass_scale
@@ -103,7 +104,7 @@ class World:
         self.warehouse: Warehouse = build(scenario, c)
         self.robot = Robot(c, scenario.start_pose)
         self.lidar = Lidar(scenario.lidar, c, self.robot.lidar_height, self.rng, ROBOT_COLLISION_GROUP)
-        self.imu = Imu(self.rng, *self.imu_noise)
+        self.imu = Imu(self.rng, *self.imu_spec)
         robot = scenario.robot
         self.odometry = WheelOdometry(WHEEL_RADIUS, WHEEL_BASE, robot.encoder_noise, self.rng, unicycle_exact)
         self._limits = (robot.v_min, robot.v_max, robot.w_low, robot.w_max)
@@ -131,9 +132,7 @@ class World:
         self.robot.drive(0.0, 0.0)
         self.steps = 0
         self._angles = self.robot.wheel_angles()
-        start = self.pose()
-        self._yaw = start.yaw
-        self.odometry.reset(start)
+        self.odometry.reset(self.pose())
         self.imu.reset()
         self.readings = self._read(0.0, bool(self.touching()))
         return self.readings
@@ -181,10 +180,10 @@ class World:
         if dt > 0.0:
             left, right = self.robot.wheel_angles()
             # The gyro is read whichever source the heading takes, so switching it changes no other draw.
-            turned = self.imu.turned(wrap_angle(yaw - self._yaw), dt)
+            turned = self.imu.turned(wrap_angle(yaw - self.readings.pose.yaw), dt)
             self.odometry.update((left - self._angles[0]) / dt, (right - self._angles[1]) / dt, dt,
                                  turned if self.gyro_heading else None)
-            self._angles, self._yaw = (left, right), yaw
+            self._angles = (left, right)
         camera = None
         if self.camera is not None:
             camera = {key: frozen(image) for key, image in self.camera.from_mount(*self.robot.camera_pose()).items()}

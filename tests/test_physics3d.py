@@ -217,6 +217,50 @@ def test_odometry_drift_grows_with_encoder_noise():
     assert drift[0.0] < drift[0.05] < drift[0.2]
 
 
+def _heading_error(heading_source: str, seed: int, **imu) -> float:
+    end = _curving_drive(0.05, seed, heading_source=heading_source, **imu)[-1]
+    return abs(wrap_angle(end.pose.yaw - end.odometry.pose.yaw))
+
+
+def test_gyro_heading_holds_where_wheel_heading_drifts():
+    wheels = np.mean([_heading_error("wheels", seed) for seed in range(3)])
+    perfect = np.mean([_heading_error("gyro", seed, gyro_noise=0.0, gyro_bias=0.0) for seed in range(3)])
+    noisy = [_heading_error("gyro", seed, gyro_noise=0.02, gyro_bias=0.002) for seed in range(3)]
+    assert wheels > 0.05  # 5% encoder noise over 4.8 m turns the estimate by degrees
+    assert perfect < 1e-6  # a perfect gyro integrated over each period is the true turn
+    assert 0.0 < np.mean(noisy) < wheels / 3  # a noisy, biased gyro still holds the heading better
+    assert _heading_error("gyro", 1, gyro_noise=0.02, gyro_bias=0.002) == noisy[1]
+
+
+def test_the_heading_source_changes_no_other_draw():
+    runs = [_curving_drive(0.05, 0, heading_source=source, gyro_bias=0.01) for source in ("wheels", "gyro")]
+    for wheels, gyro in zip(*runs):
+        np.testing.assert_array_equal(wheels.lidar, gyro.lidar)
+        assert wheels.imu == gyro.imu and wheels.odometry.v == gyro.odometry.v
+    assert runs[0][-1].odometry.pose != runs[1][-1].odometry.pose
+
+
+def test_the_gyro_bias_is_drawn_per_episode_and_turns_the_estimate_at_rest():
+    world = World(OPEN, gyro_noise=0.0, gyro_bias=0.05, heading_source="gyro")
+
+    def drift(seed: int) -> tuple[float, float]:
+        start = world.reset(seed=seed).odometry.pose.yaw
+        readings = [world.step(0.0, 0.0) for _ in range(20)]
+        rates = [r.imu.angular_velocity[2] for r in readings]
+        return wrap_angle(readings[-1].odometry.pose.yaw - start), float(np.mean(rates))
+
+    draws = [drift(seed) for seed in range(4)]
+    for turned, rate in draws:
+        assert turned == pytest.approx(rate * 2.0, abs=1e-3)  # 2 s standing still: the bias, integrated
+    assert len({round(rate, 6) for _, rate in draws}) == 4 and drift(1) == draws[1]
+    world.close()
+
+
+def test_an_unknown_heading_source_is_refused():
+    with pytest.raises(ValueError, match="heading_source must be one of"):
+        World(OPEN, heading_source="compass")
+
+
 def test_a_graze_that_separates_within_the_control_period_is_a_collision():
     """The robot's side grazes a pillar 0.19 m off its path (0.01 m of overlap), is deflected and
     clear again before the period ends: a contact at any of the 48 sub-steps counts."""
@@ -473,47 +517,3 @@ def test_human_render_opens_the_gui_under_xvfb():
     finally:
         server.terminate()
         server.wait(timeout=10)
-
-
-def _heading_error(heading_source: str, seed: int, **imu) -> float:
-    end = _curving_drive(0.05, seed, heading_source=heading_source, **imu)[-1]
-    return abs(wrap_angle(end.pose.yaw - end.odometry.pose.yaw))
-
-
-def test_gyro_heading_holds_where_wheel_heading_drifts():
-    wheels = np.mean([_heading_error("wheels", seed) for seed in range(3)])
-    perfect = np.mean([_heading_error("gyro", seed, gyro_noise=0.0, gyro_bias=0.0) for seed in range(3)])
-    noisy = [_heading_error("gyro", seed, gyro_noise=0.02, gyro_bias=0.002) for seed in range(3)]
-    assert wheels > 0.05  # 5% encoder noise over 4.8 m turns the estimate by degrees
-    assert perfect < 1e-6  # a perfect gyro integrated over each period is the true turn
-    assert 0.0 < np.mean(noisy) < wheels / 3  # a noisy, biased gyro still holds the heading better
-    assert _heading_error("gyro", 1, gyro_noise=0.02, gyro_bias=0.002) == noisy[1]
-
-
-def test_the_heading_source_changes_no_other_draw():
-    runs = [_curving_drive(0.05, 0, heading_source=source, gyro_bias=0.01) for source in ("wheels", "gyro")]
-    for wheels, gyro in zip(*runs):
-        np.testing.assert_array_equal(wheels.lidar, gyro.lidar)
-        assert wheels.imu == gyro.imu and wheels.odometry.v == gyro.odometry.v
-    assert runs[0][-1].odometry.pose != runs[1][-1].odometry.pose
-
-
-def test_the_gyro_bias_is_drawn_per_episode_and_turns_the_estimate_at_rest():
-    world = World(OPEN, gyro_noise=0.0, gyro_bias=0.05, heading_source="gyro")
-
-    def drift(seed: int) -> tuple[float, float]:
-        start = world.reset(seed=seed).odometry.pose.yaw
-        readings = [world.step(0.0, 0.0) for _ in range(20)]
-        rates = [r.imu.angular_velocity[2] for r in readings]
-        return wrap_angle(readings[-1].odometry.pose.yaw - start), float(np.mean(rates))
-
-    draws = [drift(seed) for seed in range(4)]
-    for turned, rate in draws:
-        assert turned == pytest.approx(rate * 2.0, abs=1e-3)  # 2 s standing still: the bias, integrated
-    assert len({round(rate, 6) for _, rate in draws}) == 4 and drift(1) == draws[1]
-    world.close()
-
-
-def test_an_unknown_heading_source_is_refused():
-    with pytest.raises(ValueError, match="heading_source must be one of"):
-        World(OPEN, heading_source="compass")
