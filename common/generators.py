@@ -11,161 +11,72 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable, Iterator, Literal, NamedTuple
+from typing import Callable, Iterator, Literal
 
 import numpy as np
 
-from common import placement
 from common.errors import ConfigError, quote
-from common.occupancy import goal_reachable
+from common.layouts import CIRCLE_ANY, CIRCLE_NEAR, CRATE, MIXED_ANY, MIXED_NEAR, PILLAR, SHELF, Layout, Step, lay_out
+from common.occupancy import goal_reachable, path_exists, shapes_grid
+from common.placement import CIRCLE
 from common.scenario import BoxObstacle, CircleObstacle, Obstacle, Scenario
 
 Split = Literal["train", "eval"]
 KINDS = ("open", "sparse", "cluttered", "warehouse", "trap")
 _SPLIT_IDS = {"train": 0, "eval": 1}
 _MAX_ATTEMPTS = 200
+# Kinds whose layouts check their own reachability and keep every obstacle the robot's radius +
+# 0.3 m from the start and the goal, more than Scenario.check asks: checking again cost a third of
+# a warehouse's generation.
+_CHECKED_BY_LAYOUT = frozenset({"open", "sparse", "cluttered", "warehouse"})
 
 
-class _Shape(NamedTuple):
-    """A proposed obstacle as raw numbers; it becomes a validated obstacle only once it fits."""
-
-    kind: int  # placement.CIRCLE or placement.BOX
-    x: float
-    y: float
-    size: tuple[float, ...]  # (radius,) or (length, width, yaw)
-    height: float
-
-    @property
-    def params(self) -> np.ndarray:
-        return np.array([self.x, self.y, *self.size, *(0.0,) * (3 - len(self.size))])
-
-    def build(self) -> Obstacle:
-        if self.kind == placement.CIRCLE:
-            return CircleObstacle(x=self.x, y=self.y, radius=self.size[0], height=self.height)
-        length, width, yaw = self.size
-        return BoxObstacle(x=self.x, y=self.y, length=length, width=width, yaw=yaw, height=self.height)
-
-
-class _Layout:
-    """Obstacles placed one by one, each rejected if it crowds another, the start, the goal or a wall."""
-
-    def __init__(self, template: Scenario, rng: np.random.Generator, start, goal, capacity: int = 32) -> None:
-        self.template = template
-        self.rng = rng
-        self.start, self.goal = start, goal
-        self.clearance = 2.0 * template.robot.bounding_radius + 0.05
-        world, margin = template.world, self.clearance
-        self._low = np.array(world.offset) + margin
-        self._high = np.array(world.offset) + (world.width - margin, world.height - margin)
-        self._ends = np.array([start[:2], goal])
-        self.obstacles: list[Obstacle] = []
-        # What the compiled check reads of the placed shapes, in arrays grown as needed.
-        self._kinds = np.zeros(capacity, dtype=np.int64)
-        self._params = np.zeros((capacity, 5))
-        self._outlines = np.zeros((capacity, placement.OUTLINE_POINTS, 2))
-
-    def _place(self, shape: _Shape) -> bool:
-        """Place the shape if it crowds nothing; whether it was placed."""
-        count = len(self.obstacles)
-        if count == len(self._kinds):
-            for name in ("_kinds", "_params", "_outlines"):
-                grown = getattr(self, name)
-                setattr(self, name, np.concatenate([grown, np.zeros_like(grown)]))
-        if not placement.place(shape.kind, shape.params, self._low, self._high, self._ends,
-                               self.template.robot.bounding_radius + 0.3, self.clearance, self._kinds, self._params,
-                               self._outlines, count):
-            return False
-        self.obstacles.append(shape.build())
-        return True
-
-    def add(self, propose: Callable[[], _Shape], count: int, tries: int = 60) -> bool:
-        """Place ``count`` shapes from ``propose``; False if one found no free place in ``tries``."""
-        for _ in range(count):
-            if not any(self._place(propose()) for _ in range(tries)):
-                return False
-        return True
-
-    def uniform(self, low: float, high: float) -> float:
-        """``rng.uniform(low, high)`` bit for bit (NumPy computes low + (high - low) * random()), at
-        a third of its call cost: the layouts draw thousands of these per scenario."""
-        return low + (high - low) * self.rng.random()
-
-    def near_route(self, spread: float) -> tuple[float, float]:
-        """A point on the start-goal segment's middle stretch, jittered sideways."""
-        t = self.uniform(0.25, 0.75)
-        sx, sy = self.start[:2]
-        gx, gy = self.goal
-        heading = math.atan2(gy - sy, gx - sx)
-        side = self.uniform(-spread, spread)
-        return sx + t * (gx - sx) - side * math.sin(heading), sy + t * (gy - sy) + side * math.cos(heading)
-
-    def anywhere(self) -> tuple[float, float]:
-        x0, y0 = self.template.world.offset
-        return self.uniform(x0, x0 + self.template.world.width), self.uniform(y0, y0 + self.template.world.height)
-
-    def circle(self, where: tuple[float, float], r_min: float, r_max: float) -> _Shape:
-        return _Shape(placement.CIRCLE, float(where[0]), float(where[1]), (self.uniform(r_min, r_max),), 0.5)
-
-    def box(self, where: tuple[float, float], side_min: float, side_max: float, height: float = 0.5) -> _Shape:
-        length, width = self.uniform(side_min, side_max), self.uniform(side_min, side_max)
-        yaw = self.uniform(-math.pi, math.pi)
-        return _Shape(placement.BOX, float(where[0]), float(where[1]), (length, width, yaw), height)
-
-
-def _start_goal(template: Scenario, rng: np.random.Generator, min_distance: float, margin: float = 1.0):
-    """A start pose (random yaw) and a goal at least ``min_distance`` apart, ``margin`` inside the world."""
+def _placed(template: Scenario, rng: np.random.Generator, min_distance: float, *steps: Step) -> tuple | None:
+    """A start and goal ``min_distance`` apart and the steps' obstacles around them, or None if one
+    found no place or the goal cannot be reached."""
     world = template.world
-    x0, y0 = world.offset
-    min_distance = min(min_distance, 0.9 * math.hypot(world.width - 2 * margin, world.height - 2 * margin))
-    while True:
-        sx, gx = rng.uniform(x0 + margin, x0 + world.width - margin, 2)
-        sy, gy = rng.uniform(y0 + margin, y0 + world.height - margin, 2)
-        if math.hypot(gx - sx, gy - sy) >= min_distance:
-            return (float(sx), float(sy), float(rng.uniform(-math.pi, math.pi))), (float(gx), float(gy))
+    robot_radius = template.robot.bounding_radius
+    layout = lay_out(rng, (*world.offset, world.width, world.height), min_distance, steps, robot_radius)
+    # Reachability is judged on the layout's arrays, before any obstacle is built.
+    if layout is None or not path_exists(shapes_grid(world, layout.kinds, layout.params, 0.1, robot_radius),
+                                         layout.start, layout.goal, template.goal_threshold):
+        return None
+    return layout.start, layout.goal, _obstacles(layout)
 
 
-def _open(template: Scenario, rng: np.random.Generator, difficulty: float) -> tuple:
-    start, goal = _start_goal(template, rng, 2.0 + 4.0 * difficulty)
-    return start, goal, []
+def _obstacles(layout: Layout) -> list[Obstacle]:
+    obstacles: list[Obstacle] = []
+    for kind, (x, y, a, b, yaw), height in zip(layout.kinds.tolist(), layout.params.tolist(), layout.heights.tolist()):
+        if kind == CIRCLE:
+            obstacles.append(CircleObstacle(x=x, y=y, radius=a, height=height))
+        else:
+            obstacles.append(BoxObstacle(x=x, y=y, length=a, width=b, yaw=yaw, height=height))
+    return obstacles
 
 
-def _sparse(template: Scenario, rng: np.random.Generator, difficulty: float) -> tuple:
-    start, goal = _start_goal(template, rng, 4.0 + 2.0 * difficulty)
-    layout = _Layout(template, rng, start, goal)
+def _open(template: Scenario, rng: np.random.Generator, difficulty: float) -> tuple | None:
+    return _placed(template, rng, 2.0 + 4.0 * difficulty)
+
+
+def _sparse(template: Scenario, rng: np.random.Generator, difficulty: float) -> tuple | None:
     count = int(round(3 + 5 * difficulty))
     on_route = max(1, count // 3)
-    placed = layout.add(lambda: layout.circle(layout.near_route(0.6), 0.25, 0.5), on_route) and layout.add(
-        lambda: layout.circle(layout.anywhere(), 0.25, 0.5), count - on_route)
-    return (start, goal, layout.obstacles) if placed else None
+    return _placed(template, rng, 4.0 + 2.0 * difficulty,
+                   Step(CIRCLE_NEAR, on_route, radius=(0.25, 0.5), spread=0.6),
+                   Step(CIRCLE_ANY, count - on_route, radius=(0.25, 0.5)))
 
 
-def _cluttered(template: Scenario, rng: np.random.Generator, difficulty: float) -> tuple:
-    start, goal = _start_goal(template, rng, 5.0 + 2.0 * difficulty)
-    layout = _Layout(template, rng, start, goal)
+def _cluttered(template: Scenario, rng: np.random.Generator, difficulty: float) -> tuple | None:
     count = int(round(10 + 10 * difficulty))
-    shape = lambda where: (layout.circle(where, 0.2, 0.5) if rng.random() < 0.5 else layout.box(where, 0.3, 1.0))
-    placed = layout.add(lambda: shape(layout.near_route(1.0)), count // 3) and layout.add(
-        lambda: shape(layout.anywhere()), count - count // 3)
-    return (start, goal, layout.obstacles) if placed else None
+    return _placed(template, rng, 5.0 + 2.0 * difficulty,
+                   Step(MIXED_NEAR, count // 3, radius=(0.2, 0.5), side=(0.3, 1.0), spread=1.0),
+                   Step(MIXED_ANY, count - count // 3, radius=(0.2, 0.5), side=(0.3, 1.0)))
 
 
-def _warehouse(template: Scenario, rng: np.random.Generator, difficulty: float) -> tuple:
+def _warehouse(template: Scenario, rng: np.random.Generator, difficulty: float) -> tuple | None:
     """Shelving rows, pillars and scattered crates: 31 obstacles, as in the 3D tutorial's warehouse."""
-    start, goal = _start_goal(template, rng, 3.0 + 3.0 * difficulty)
-    layout = _Layout(template, rng, start, goal)
-    def shelf() -> _Shape:
-        # x and y from two draws of anywhere(), as when the suites were first measured.
-        x, y = layout.anywhere()[0], layout.anywhere()[1]
-        length = layout.uniform(1.5, 2.5)
-        return _Shape(placement.BOX, float(x), float(y), (length, 0.4, float(rng.choice([0.0, math.pi / 2]))), 1.8)
-
-    def pillar() -> _Shape:
-        x, y = layout.anywhere()[0], layout.anywhere()[1]
-        return _Shape(placement.CIRCLE, float(x), float(y), (0.15,), 3.0)
-
-    crate = lambda: layout.box(layout.anywhere(), 0.3, 0.7, height=0.6)
-    placed = layout.add(shelf, 6) and layout.add(pillar, 5) and layout.add(crate, 20, tries=200)
-    return (start, goal, layout.obstacles) if placed else None
+    return _placed(template, rng, 3.0 + 3.0 * difficulty, Step(SHELF, 6, height=1.8), Step(PILLAR, 5, height=3.0),
+                   Step(CRATE, 20, tries=200, side=(0.3, 0.7), height=0.6))
 
 
 def _trap(template: Scenario, rng: np.random.Generator, difficulty: float) -> tuple:
@@ -224,7 +135,7 @@ def generate(kind: str, seed: int, difficulty: float = 0.5, split: Split = "trai
         scenario = template.model_copy(update=dict(
             name=f"{kind}-{split}-{seed}", kind=kind, difficulty=difficulty, seed=seed,
             start=tuple(float(v) for v in start), goal=(float(goal[0]), float(goal[1])), obstacles=obstacles))
-        if _valid(scenario) and goal_reachable(scenario):
+        if kind in _CHECKED_BY_LAYOUT or (_valid(scenario) and goal_reachable(scenario)):
             return scenario
     raise RuntimeError(f"no reachable {kind} layout in {_MAX_ATTEMPTS} attempts (seed {seed})")
 

@@ -15,11 +15,30 @@ from numba import njit
 
 
 @njit(cache=True)
+def circle_distance(px: float, py: float, cx: float, cy: float, radius: float) -> float:
+    """Signed distance from the point (px, py) to a circle."""
+    return math.hypot(px - cx, py - cy) - radius
+
+
+@njit(cache=True)
+def box_distance(px: float, py: float, cx: float, cy: float, length: float, width: float, c: float, s: float) -> float:
+    """Signed distance from the point (px, py) to a box whose yaw has cosine ``c`` and sine ``s``."""
+    dx, dy = px - cx, py - cy
+    qx = abs(c * dx + s * dy) - 0.5 * length
+    qy = abs(-s * dx + c * dy) - 0.5 * width
+    if qx > 0.0 and qy > 0.0:
+        return math.hypot(qx, qy)  # beyond a corner
+    # hypot(q, 0) is |q| exactly, so inside or beside a side this is hypot(max(qx, 0), max(qy, 0))
+    # + min(max(qx, qy), 0) to the last bit, without the hypot.
+    return max(qx, qy)
+
+
+@njit(cache=True)
 def circle_sdf(points: np.ndarray, cx: float, cy: float, radius: float) -> np.ndarray:
     """Signed distance from ``points`` (N, 2) to a circle."""
     out = np.empty(points.shape[0])
     for i in range(points.shape[0]):
-        out[i] = math.hypot(points[i, 0] - cx, points[i, 1] - cy) - radius
+        out[i] = circle_distance(points[i, 0], points[i, 1], cx, cy, radius)
     return out
 
 
@@ -29,10 +48,7 @@ def box_sdf(points: np.ndarray, cx: float, cy: float, length: float, width: floa
     c, s = math.cos(yaw), math.sin(yaw)
     out = np.empty(points.shape[0])
     for i in range(points.shape[0]):
-        dx, dy = points[i, 0] - cx, points[i, 1] - cy
-        qx = abs(c * dx + s * dy) - 0.5 * length
-        qy = abs(-s * dx + c * dy) - 0.5 * width
-        out[i] = math.hypot(max(qx, 0.0), max(qy, 0.0)) + min(max(qx, qy), 0.0)
+        out[i] = box_distance(points[i, 0], points[i, 1], cx, cy, length, width, c, s)
     return out
 
 

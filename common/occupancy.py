@@ -8,12 +8,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
+from numba import njit
 from scipy import ndimage
 
-from common.scenario import Scenario
+from common.geometry import box_distance, circle_distance
+from common.placement import BOX, CIRCLE, shape_bounds
+from common.scenario import BoxObstacle, CircleObstacle, Scenario, WorldSpec
 
 if TYPE_CHECKING:  # a runtime import would tie the grid module to the controllers package
     from common.controllers.base import LidarGeometry
@@ -30,8 +33,8 @@ class OccupancyGrid:
     def cell_of(self, x: float, y: float) -> tuple[int, int]:
         """The (row, col) of the cell containing world point (x, y), clamped to the grid."""
         rows, cols = self.occupied.shape
-        col = int(np.clip((x - self.origin[0]) / self.resolution, 0, cols - 1))
-        row = int(np.clip((y - self.origin[1]) / self.resolution, 0, rows - 1))
+        col = int(min(max((x - self.origin[0]) / self.resolution, 0), cols - 1))
+        row = int(min(max((y - self.origin[1]) / self.resolution, 0), rows - 1))
         return row, col
 
     def centre_of(self, row: int, col: int) -> tuple[float, float]:
@@ -63,32 +66,48 @@ def scenario_grid(scenario: Scenario, resolution: float = 0.2, inflation: float 
     """The ground-truth grid of a scenario: a cell is occupied when its centre lies within
     ``inflation`` (default: the robot's bounding radius) of an obstacle or of a boundary wall."""
     inflation = scenario.robot.bounding_radius if inflation is None else inflation
-    world = scenario.world
-    cols = max(1, int(round(world.width / resolution)))
-    rows = max(1, int(round(world.height / resolution)))
-    xs = world.offset[0] + (np.arange(cols) + 0.5) * resolution
-    ys = world.offset[1] + (np.arange(rows) + 0.5) * resolution
-    centres = np.stack(np.meshgrid(xs, ys), axis=-1)  # (rows, cols, 2): each cell's centre
-    occupied = np.zeros((rows, cols), dtype=bool)
+    # Circles and boxes, nearly every obstacle there is, are rasterised compiled; the rest here.
+    kinds, params, others = [], [], []
     for obstacle in scenario.obstacles:
         if obstacle.unobstructed:
             continue
-        # Only cells within ``inflation`` of the obstacle's bounding box can be occupied by it:
-        # measuring just those makes a grid cost its obstacles' area, not the world's.
+        if isinstance(obstacle, CircleObstacle):
+            kinds.append(CIRCLE)
+            params.append((obstacle.x, obstacle.y, obstacle.radius, 0.0, 0.0))
+        elif isinstance(obstacle, BoxObstacle):
+            kinds.append(BOX)
+            params.append((obstacle.x, obstacle.y, obstacle.length, obstacle.width, obstacle.yaw))
+        else:
+            others.append(obstacle)
+    grid = shapes_grid(scenario.world, np.array(kinds, dtype=np.int64), np.array(params, dtype=float).reshape(-1, 5),
+                       resolution, inflation)
+    x0, y0 = grid.origin
+    rows, cols = grid.occupied.shape
+    for obstacle in others:
         x_min, y_min, x_max, y_max = obstacle.bounds()
-        c0, c1 = _cell_span(x_min - inflation, x_max + inflation, world.offset[0], resolution, cols)
-        r0, r1 = _cell_span(y_min - inflation, y_max + inflation, world.offset[1], resolution, rows)
+        c0, c1 = _cell_span(x_min - inflation, x_max + inflation, x0, resolution, cols)
+        r0, r1 = _cell_span(y_min - inflation, y_max + inflation, y0, resolution, rows)
         if c0 < c1 and r0 < r1:
-            near = obstacle.sdf(np.ascontiguousarray(centres[r0:r1, c0:c1]).reshape(-1, 2)) < inflation
-            occupied[r0:r1, c0:c1] |= near.reshape(r1 - r0, c1 - c0)
-    gx, gy = centres[..., 0], centres[..., 1]
+            near = obstacle.sdf(_cell_centres(x0, y0, resolution, r0, r1, c0, c1)) < inflation
+            grid.occupied[r0:r1, c0:c1] |= near.reshape(r1 - r0, c1 - c0)
+    return grid
+
+
+def shapes_grid(world: WorldSpec, kinds: np.ndarray, params: np.ndarray, resolution: float,
+                inflation: float) -> OccupancyGrid:
+    """The grid of circles and boxes given as kinds and parameters (see :mod:`common.placement`)
+    in ``world``, with its boundary walls if it has them, inflated as :func:`scenario_grid` does."""
+    cols = max(1, int(round(world.width / resolution)))
+    rows = max(1, int(round(world.height / resolution)))
+    occupied = np.zeros((rows, cols), dtype=bool)
+    x0, y0 = world.offset
+    _rasterise(occupied, kinds, params, x0, y0, resolution, inflation)
     if world.walls:
-        x0, y0 = world.offset
-        occupied |= (gx - x0 < inflation) | (x0 + world.width - gx < inflation)
-        occupied |= (gy - y0 < inflation) | (y0 + world.height - gy < inflation)
-    return OccupancyGrid(occupied=occupied, origin=tuple(world.offset), resolution=resolution)
+        _mark_walls(occupied, x0, y0, world.width, world.height, resolution, inflation)
+    return OccupancyGrid(occupied=occupied, origin=(x0, y0), resolution=resolution)
 
 
+@njit(cache=True)
 def _cell_span(low: float, high: float, origin: float, resolution: float, cells: int) -> tuple[int, int]:
     """The cells [first, last) whose centres may lie within [low, high], one spare cell each side."""
     first = math.floor((low - origin) / resolution - 0.5) - 1
@@ -96,18 +115,110 @@ def _cell_span(low: float, high: float, origin: float, resolution: float, cells:
     return max(0, min(cells, first)), max(0, min(cells, last))
 
 
-def goal_reachable(scenario: Scenario, resolution: float = 0.1) -> bool:
-    """Whether the robot's footprint can travel from start to goal without touching anything.
+@njit(cache=True)
+def _cell_centres(x0: float, y0: float, resolution: float, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
+    """The centres (N, 2) of the cells in rows [r0, r1) and columns [c0, c1), row by row."""
+    centres = np.empty(((r1 - r0) * (c1 - c0), 2))
+    i = 0
+    for row in range(r0, r1):
+        for col in range(c0, c1):
+            centres[i, 0] = x0 + (col + 0.5) * resolution
+            centres[i, 1] = y0 + (row + 0.5) * resolution
+            i += 1
+    return centres
 
-    The goal counts as reached within ``goal_threshold``, so the goal cell may sit in a narrow
-    pocket; we test connectivity to the start from the free cell nearest the goal inside that radius.
+
+@njit(cache=True)
+def _rasterise(occupied: np.ndarray, kinds: np.ndarray, params: np.ndarray, x0: float, y0: float,
+               resolution: float, inflation: float) -> None:
+    """Mark the cells within ``inflation`` of each circle or box (a kind and five parameters).
+
+    Only cells within ``inflation`` of a shape's bounding box can be occupied by it: measuring
+    just those makes a grid cost its obstacles' area, not the world's.
     """
-    grid = scenario_grid(scenario, resolution)
-    rows, cols = np.nonzero(grid.free_component(*scenario.start[:2]))
-    cx = grid.origin[0] + (cols + 0.5) * resolution
-    cy = grid.origin[1] + (rows + 0.5) * resolution
-    gx, gy = scenario.goal
-    return bool(np.any(np.hypot(cx - gx, cy - gy) <= scenario.goal_threshold))
+    rows, cols = occupied.shape
+    for k in range(kinds.shape[0]):
+        x_min, y_min, x_max, y_max = shape_bounds(kinds[k], params[k])
+        c0, c1 = _cell_span(x_min - inflation, x_max + inflation, x0, resolution, cols)
+        r0, r1 = _cell_span(y_min - inflation, y_max + inflation, y0, resolution, rows)
+        x, y, a, b, yaw = params[k, 0], params[k, 1], params[k, 2], params[k, 3], params[k, 4]
+        c, s = math.cos(yaw), math.sin(yaw)
+        for row in range(r0, r1):
+            cy = y0 + (row + 0.5) * resolution
+            for col in range(c0, c1):
+                cx = x0 + (col + 0.5) * resolution
+                if kinds[k] == CIRCLE:
+                    distance = circle_distance(cx, cy, x, y, a)
+                else:
+                    distance = box_distance(cx, cy, x, y, a, b, c, s)
+                if distance < inflation:
+                    occupied[row, col] = True
+
+
+@njit(cache=True)
+def _mark_walls(occupied: np.ndarray, x0: float, y0: float, width: float, height: float, resolution: float,
+                inflation: float) -> None:
+    """Mark the cells whose centres lie within ``inflation`` of the world's boundary."""
+    rows, cols = occupied.shape
+    for row in range(rows):
+        y = y0 + (row + 0.5) * resolution
+        near_y = y - y0 < inflation or y0 + height - y < inflation
+        for col in range(cols):
+            x = x0 + (col + 0.5) * resolution
+            if near_y or x - x0 < inflation or x0 + width - x < inflation:
+                occupied[row, col] = True
+
+
+def goal_reachable(scenario: Scenario, resolution: float = 0.1) -> bool:
+    """Whether the robot's footprint can travel from start to goal without touching anything, on
+    the scenario's grid at ``resolution`` (see :func:`path_exists`)."""
+    return path_exists(scenario_grid(scenario, resolution), scenario.start[:2], scenario.goal, scenario.goal_threshold)
+
+
+def path_exists(grid: OccupancyGrid, start: Sequence[float], goal: Sequence[float], threshold: float) -> bool:
+    """Whether free cells connect the start's cell to a cell within ``threshold`` of the goal.
+
+    The goal counts as reached within the threshold, so the goal cell may sit in a narrow pocket:
+    any free cell inside that radius will do.
+    """
+    return _reaches(grid.occupied, grid.cell_of(start[0], start[1]), grid.origin[0], grid.origin[1], grid.resolution,
+                    goal[0], goal[1], threshold)
+
+
+@njit(cache=True)
+def _reaches(occupied: np.ndarray, start: tuple[int, int], x0: float, y0: float, resolution: float,
+             gx: float, gy: float, threshold: float) -> bool:
+    """Whether a free cell 8-connected to the start cell has its centre within ``threshold`` of the goal.
+
+    A depth-first fill that tries the goal-ward neighbour first and stops at the first such cell:
+    the generators ask this of every layout, and most reach the goal in a few dozen cells where a
+    full labelling visits thousands.
+    """
+    rows, cols = occupied.shape
+    if occupied[start[0], start[1]]:
+        return False
+    seen = np.zeros((rows, cols), dtype=np.bool_)
+    stack = np.empty((rows * cols, 2), dtype=np.int64)
+    stack[0, 0], stack[0, 1] = start[0], start[1]
+    seen[start[0], start[1]] = True
+    top = 1
+    order = np.empty(8)
+    steps = np.array([(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)])
+    while top:
+        top -= 1
+        row, col = stack[top, 0], stack[top, 1]
+        cx, cy = x0 + (col + 0.5) * resolution, y0 + (row + 0.5) * resolution
+        if math.hypot(cx - gx, cy - gy) <= threshold:
+            return True
+        for k in range(8):
+            order[k] = steps[k, 1] * (gx - cx) + steps[k, 0] * (gy - cy)
+        for k in np.argsort(order):  # the most goal-ward pushed last, so explored next
+            r, c = row + steps[k, 0], col + steps[k, 1]
+            if 0 <= r < rows and 0 <= c < cols and not occupied[r, c] and not seen[r, c]:
+                seen[r, c] = True
+                stack[top, 0], stack[top, 1] = r, c
+                top += 1
+    return False
 
 
 def inflate(occupied: np.ndarray, radius: float, resolution: float) -> np.ndarray:

@@ -13,7 +13,7 @@ import math
 import numpy as np
 from numba import njit
 
-from common.geometry import box_sdf, circle_sdf
+from common.geometry import box_distance, box_sdf, circle_distance, circle_sdf
 
 CIRCLE, BOX = 0, 1
 
@@ -27,9 +27,37 @@ def shape_sdf(kind: int, params: np.ndarray, points: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
+def any_within(kind: int, params: np.ndarray, points: np.ndarray, limit: float) -> bool:
+    """Whether any of ``shape_sdf``'s distances is below ``limit``; stops at the first that is."""
+    if kind == CIRCLE:
+        for i in range(points.shape[0]):
+            if circle_distance(points[i, 0], points[i, 1], params[0], params[1], params[2]) < limit:
+                return True
+        return False
+    c, s = math.cos(params[4]), math.sin(params[4])
+    for i in range(points.shape[0]):
+        if box_distance(points[i, 0], points[i, 1], params[0], params[1], params[2], params[3], c, s) < limit:
+            return True
+    return False
+
+
+@njit(cache=True)
 def bounding_radius(kind: int, params: np.ndarray) -> float:
     """The radius about the shape's centre (x, y) that holds it."""
     return params[2] if kind == CIRCLE else 0.5 * math.hypot(params[2], params[3])
+
+
+@njit(cache=True)
+def shape_bounds(kind: int, params: np.ndarray) -> tuple[float, float, float, float]:
+    """The axis-aligned box (x_min, y_min, x_max, y_max) holding the shape."""
+    x, y = params[0], params[1]
+    if kind == CIRCLE:
+        return x - params[2], y - params[2], x + params[2], y + params[2]
+    c, s = math.cos(params[4]), math.sin(params[4])
+    # A centred box's corners reach |c| hl + |s| hw along x and |s| hl + |c| hw along y.
+    hl, hw = 0.5 * params[2], 0.5 * params[3]
+    dx, dy = abs(c) * hl + abs(s) * hw, abs(s) * hl + abs(c) * hw
+    return x - dx, y - dy, x + dx, y + dy
 
 
 _CIRCLE_POINTS = 32
@@ -37,6 +65,7 @@ _SIDE_POINTS = 8  # per box side: a box's outline also has 32 points
 OUTLINE_POINTS = _CIRCLE_POINTS
 _ANGLES = np.linspace(0.0, 2.0 * math.pi, _CIRCLE_POINTS, endpoint=False)
 _UNIT_CIRCLE = np.column_stack([np.cos(_ANGLES), np.sin(_ANGLES)])  # a constant of the compiled code
+_CORNER_SIGNS = ((1.0, 1.0), (-1.0, 1.0), (-1.0, -1.0), (1.0, -1.0), (1.0, 1.0))  # counter-clockwise, closed
 
 
 @njit(cache=True)
@@ -51,14 +80,14 @@ def outline(kind: int, params: np.ndarray, out: np.ndarray) -> None:
         return
     c, s = math.cos(params[4]), math.sin(params[4])
     hl, hw = 0.5 * params[2], 0.5 * params[3]
-    corners = np.empty((5, 2))
-    for k, (u, v) in enumerate(((hl, hw), (-hl, hw), (-hl, -hw), (hl, -hw), (hl, hw))):
-        corners[k, 0], corners[k, 1] = u * c - v * s + x, u * s + v * c + y
     for k in range(4):
+        (u0, v0), (u1, v1) = _CORNER_SIGNS[k], _CORNER_SIGNS[k + 1]
+        x0, y0 = u0 * hl * c - v0 * hw * s + x, u0 * hl * s + v0 * hw * c + y
+        x1, y1 = u1 * hl * c - v1 * hw * s + x, u1 * hl * s + v1 * hw * c + y
         for i in range(_SIDE_POINTS):
             step = i / _SIDE_POINTS
-            out[k * _SIDE_POINTS + i, 0] = corners[k, 0] + step * (corners[k + 1, 0] - corners[k, 0])
-            out[k * _SIDE_POINTS + i, 1] = corners[k, 1] + step * (corners[k + 1, 1] - corners[k, 1])
+            out[k * _SIDE_POINTS + i, 0] = x0 + step * (x1 - x0)
+            out[k * _SIDE_POINTS + i, 1] = y0 + step * (y1 - y0)
 
 
 @njit(cache=True)
@@ -76,18 +105,17 @@ def place(kind: int, params: np.ndarray, low: np.ndarray, high: np.ndarray, ends
     for i in range(n):
         if points[i, 0] < low[0] or points[i, 1] < low[1] or points[i, 0] > high[0] or points[i, 1] > high[1]:
             return False
-    if shape_sdf(kind, params, ends).min() < end_clearance:
+    if any_within(kind, params, ends, end_clearance):
         return False
     radius = bounding_radius(kind, params)
     for j in range(count):
         # Bounding circles apart by the clearance need no closer look. Near ones are measured
         # outline to outline: the shapes are convex, so their outlines' gaps are theirs.
         gap = radius + bounding_radius(kinds[j], placed[j]) + clearance
-        if math.hypot(placed[j, 0] - params[0], placed[j, 1] - params[1]) >= gap:
+        dx, dy = placed[j, 0] - params[0], placed[j, 1] - params[1]
+        if dx * dx + dy * dy >= gap * gap:
             continue
-        if shape_sdf(kinds[j], placed[j], points).min() < clearance:
-            return False
-        if shape_sdf(kind, params, outlines[j]).min() < clearance:
+        if any_within(kinds[j], placed[j], points, clearance) or any_within(kind, params, outlines[j], clearance):
             return False
     kinds[count], placed[count] = kind, params
     return True

@@ -11,7 +11,7 @@ import pytest
 
 from common.errors import ConfigError
 from common.generators import KINDS, SUITES, generate, get_suite
-from common.occupancy import goal_reachable, scenario_grid
+from common.occupancy import OccupancyGrid, goal_reachable, path_exists, scenario_grid
 from common.scenario import (
     BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, SegmentObstacle, load_scenario, save_scenario,
 )
@@ -124,6 +124,22 @@ def test_unreachable_goal_is_detected():
     scenario = Scenario(start=(2, 5, 0), goal=(8, 5), obstacles=[wall])
     assert not goal_reachable(scenario)
     assert goal_reachable(scenario.model_copy(update={"goal": (3, 8)}))
+
+
+def test_path_exists_agrees_with_labelling_the_free_cells():
+    # The goal-ward depth-first fill must answer as the 8-connected labelling it replaced.
+    rng = np.random.default_rng(1)
+    answers = []
+    for trial in range(300):
+        grid = OccupancyGrid(occupied=rng.random((30, 40)) < rng.uniform(0.3, 0.6), origin=(-1.0, 2.0), resolution=0.25)
+        start, goal = rng.uniform((-1, 2), (9, 9.5)), rng.uniform((-1, 2), (9, 9.5))
+        threshold = rng.choice([0.0, 0.3, 0.8])
+        rows, cols = np.nonzero(grid.free_component(*start))
+        centres = np.column_stack([-1.0 + (cols + 0.5) * 0.25, 2.0 + (rows + 0.5) * 0.25])
+        expected = bool(np.any(np.hypot(*(centres - goal).T) <= threshold))
+        assert path_exists(grid, start, goal, threshold) == expected, trial
+        answers.append(expected)
+    assert 0.2 < np.mean(answers) < 0.8  # both answers well represented
 
 
 def test_grid_marks_inflated_obstacles_and_walls():
