@@ -52,12 +52,20 @@ def box_sdf(points: np.ndarray, cx: float, cy: float, length: float, width: floa
     return out
 
 
-def box_corners(x: float, y: float, length: float, width: float, yaw: float) -> np.ndarray:
-    """The four corners (4, 2) of a box, counter-clockwise."""
+def box_corner_points(x: float, y: float, length: float, width: float, yaw: float) -> list[tuple[float, float]]:
+    """The four corners of a box, counter-clockwise, as (x, y) pairs.
+
+    Plain float arithmetic, so a corner is the same to the last bit on every machine (a matrix
+    product's rounding depends on the BLAS underneath).
+    """
     c, s = math.cos(yaw), math.sin(yaw)
     hl, hw = 0.5 * length, 0.5 * width
-    local = np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]])
-    return local @ np.array([[c, s], [-s, c]]) + np.array([x, y])
+    return [(x + u * c - v * s, y + u * s + v * c) for u, v in ((hl, hw), (-hl, hw), (-hl, -hw), (hl, -hw))]
+
+
+def box_corners(x: float, y: float, length: float, width: float, yaw: float) -> np.ndarray:
+    """The four corners (4, 2) of a box, counter-clockwise."""
+    return np.array(box_corner_points(x, y, length, width, yaw))
 
 
 def segments_distance(points: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:

@@ -97,11 +97,13 @@ class NavigationEnv(gym.Env):
     def _load(self, drawn: Scenario) -> None:
         """Build the world, observation layout and action mapping for a drawn scenario, under the
         env's conditions (``self.scenario`` is the scenario as conditioned: robot, sensor noise)."""
+        previous = None if self._drawn is None else self.scenario
         self._drawn = drawn
         self.scenario = scenario = self.conditions.scenario(drawn)
         self.world = self._build_world(scenario)
-        self.layout = make_layout(self.observation_name, scenario.robot, scenario.lidar, self.goal_distance_scale)
-        self.actions = ActionMapping(scenario.robot, self.action_mapping)
+        if previous is None or scenario.robot != previous.robot or scenario.lidar != previous.lidar:
+            self.layout = make_layout(self.observation_name, scenario.robot, scenario.lidar, self.goal_distance_scale)
+            self.actions = ActionMapping(scenario.robot, self.action_mapping)
         self._goal = scenario.goal
         self._threshold = scenario.goal_threshold
 

@@ -70,12 +70,16 @@ class NavEnv(NavigationEnv):
 
     def __init__(self, **kwargs) -> None:
         self._renderer: Renderer | None = None
+        self.world: World | None = None  # built by the first scenario, then reused while it accepts the next
         super().__init__(**kwargs)
 
     def _build_world(self, scenario: Scenario) -> World:
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+        if self.world is not None and self.world.accepts(scenario):
+            self.world.load(scenario)
+            return self.world
         return World(scenario, **self.conditions.world_kwargs("flatland"))
 
     def render(self) -> np.ndarray | None:

@@ -137,13 +137,17 @@ class Lidar:
     def __init__(self, spec: LidarSpec, circles: np.ndarray, boxes: np.ndarray, segments: np.ndarray,
                  rng: np.random.Generator) -> None:
         self.spec = spec
-        self.circles = np.ascontiguousarray(circles, dtype=np.float64).reshape(-1, 3)
-        self.boxes = np.ascontiguousarray(boxes, dtype=np.float64).reshape(-1, 6)
-        self.segments = np.ascontiguousarray(segments, dtype=np.float64).reshape(-1, 4)
+        self.place(circles, boxes, segments)
         self.rng = rng
         angles = spec.beam_angles()
         self._first = float(angles[0]) + spec.offset[2]
         self._delta = float(angles[1] - angles[0]) if spec.beams > 1 else 0.0
+
+    def place(self, circles: np.ndarray, boxes: np.ndarray, segments: np.ndarray) -> None:
+        """Scan these primitives from now on (arrays as the constructor takes them)."""
+        self.circles = np.ascontiguousarray(circles, dtype=np.float64).reshape(-1, 3)
+        self.boxes = np.ascontiguousarray(boxes, dtype=np.float64).reshape(-1, 6)
+        self.segments = np.ascontiguousarray(segments, dtype=np.float64).reshape(-1, 4)
 
     def origin(self, x: float, y: float, yaw: float) -> tuple[float, float]:
         """The sensor's position for a robot pose."""

@@ -21,7 +21,8 @@ from common.actuation import Actuator, WheelDynamics
 from common.kinematics import INTEGRATORS, Pose2D, WheelOdometry, wheel_speeds, wrap_angle
 from common.polygons import convex_pieces
 from common.readings import Imu, Odometry, Readings, frozen
-from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, SegmentObstacle
+from common.geometry import box_corner_points
+from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, SegmentObstacle, WorldSpec
 from flatland.lidar import Lidar
 
 GRAVITY = 9.81
@@ -60,9 +61,14 @@ class World:
         wheels = WheelDynamics(robot.wheel_radius, robot.wheel_base) if dynamics == "first_order" else None
         self.actuator = Actuator(action_delay, motor_scale, wheels)
         self.space = pymunk.Space()
+        # Circles and boxes are kept from one scenario to the next and reshaped in place (a new
+        # pymunk shape costs ten times more); polygon pieces and segments are rebuilt.
+        self._circles: list[pymunk.Circle] = []
+        self._boxes: list[pymunk.Poly] = []
+        self._pieces: list[pymunk.Shape] = []
+        self._wall_edges = self._add_walls(scenario.world)
         self.lidar = Lidar(scenario.lidar, *self._add_obstacles(scenario), rng=self.rng)
         self._build_robot(scenario)
-        robot = scenario.robot
         self._integrate = INTEGRATORS[scenario.world.integrator]
         self.odometry = WheelOdometry(robot.wheel_radius, robot.wheel_base, robot.encoder_noise, self.rng, self._integrate)
         self._dt = scenario.world.step_time
@@ -75,23 +81,61 @@ class World:
         self.steps = 0
         self.readings: Readings | None = None
 
+    def accepts(self, scenario: Scenario) -> bool:
+        """Whether :meth:`load` can take ``scenario``: the same robot, lidar and world rectangle."""
+        current = self.scenario
+        return scenario.robot == current.robot and scenario.lidar == current.lidar and scenario.world == current.world
+
+    def load(self, scenario: Scenario) -> None:
+        """Swap in another scenario's obstacles, start and goal, keeping the space, the robot and
+        its conditions (much cheaper than a new World); :meth:`reset` starts its first episode."""
+        if not self.accepts(scenario):
+            raise ValueError("load() takes a scenario with the same robot, lidar and world; build a new World")
+        self.scenario = scenario
+        self.lidar.place(*self._add_obstacles(scenario))
+        self.pose = scenario.start_pose
+
+    def _add_walls(self, world: WorldSpec) -> np.ndarray:
+        """Add the boundary walls (if the world has them) to the space; their edges for the lidar."""
+        if not world.walls:
+            return np.zeros((0, 4))
+        x0, y0 = world.offset
+        x1, y1 = x0 + world.width, y0 + world.height
+        edges = _edges(np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]]), closed=True)
+        static = self.space.static_body
+        self.space.add(*(pymunk.Segment(static, tuple(a), tuple(b), 0.0) for a, b in edges.reshape(-1, 2, 2)))
+        return edges
+
     def _add_obstacles(self, scenario: Scenario) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Add static shapes to the space; return the lidar's circles, boxes and segments."""
+        """Put the scenario's obstacles in the space; return the lidar's circles, boxes and segments."""
         static = self.space.static_body
         circles: list[tuple[float, float, float]] = []
         boxes: list[tuple[float, ...]] = []
-        segments: list[np.ndarray] = []
+        segments: list[np.ndarray] = [self._wall_edges]
+        if self._pieces:
+            self.space.remove(*self._pieces)
+        self._pieces = []
         for obstacle in scenario.obstacles:
             if obstacle.unobstructed:
                 continue
             if isinstance(obstacle, CircleObstacle):
-                circles.append((obstacle.x, obstacle.y, obstacle.radius))
-                self.space.add(pymunk.Circle(static, obstacle.radius, (obstacle.x, obstacle.y)))
+                x, y, radius = obstacle.x, obstacle.y, obstacle.radius
+                if len(circles) < len(self._circles):
+                    circle = self._circles[len(circles)]
+                    circle.unsafe_set_radius(radius)
+                    circle.unsafe_set_offset((x, y))
+                else:
+                    self._circles.append(pymunk.Circle(static, radius, (x, y)))
+                circles.append((x, y, radius))
                 continue
             if isinstance(obstacle, BoxObstacle):
+                corners = box_corner_points(obstacle.x, obstacle.y, obstacle.length, obstacle.width, obstacle.yaw)
+                if len(boxes) < len(self._boxes):
+                    self._boxes[len(boxes)].unsafe_set_vertices(corners)
+                else:
+                    self._boxes.append(pymunk.Poly(static, corners))
                 c, s = math.cos(obstacle.yaw), math.sin(obstacle.yaw)
                 boxes.append((obstacle.x, obstacle.y, c, s, 0.5 * obstacle.length, 0.5 * obstacle.width))
-                self.space.add(pymunk.Poly(static, [tuple(p) for p in obstacle.corners()]))
                 continue
             if isinstance(obstacle, PolygonObstacle):
                 ring, closed = np.asarray(obstacle.vertices, dtype=float), True
@@ -101,17 +145,24 @@ class World:
             segments.append(_edges(ring, closed))
             if closed:
                 # pymunk collides convex shapes only.
-                self.space.add(*(pymunk.Poly(static, [tuple(v) for v in piece]) for piece in convex_pieces(ring)))
+                self._pieces.extend(pymunk.Poly(static, [tuple(v) for v in piece]) for piece in convex_pieces(ring))
             else:
-                self.space.add(*(pymunk.Segment(static, tuple(a), tuple(b), 0.0) for a, b in zip(ring[:-1], ring[1:])))
-        if scenario.world.walls:
-            x0, y0 = scenario.world.offset
-            x1, y1 = x0 + scenario.world.width, y0 + scenario.world.height
-            corners = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
-            segments.append(_edges(corners, closed=True))
-            self.space.add(*(pymunk.Segment(static, tuple(a), tuple(b), 0.0) for a, b in _edges(corners, True).reshape(-1, 2, 2)))
-        return (np.array(circles).reshape(-1, 3), np.array(boxes).reshape(-1, 6),
-                np.vstack(segments) if segments else np.zeros((0, 4)))
+                self._pieces.extend(pymunk.Segment(static, tuple(a), tuple(b), 0.0) for a, b in zip(ring[:-1], ring[1:]))
+        self._use(self._circles, len(circles))
+        self._use(self._boxes, len(boxes))
+        if self._pieces:
+            self.space.add(*self._pieces)
+        # Reshaped static shapes keep their old place in the space's index until reindexed.
+        self.space.reindex_static()
+        return np.array(circles).reshape(-1, 3), np.array(boxes).reshape(-1, 6), np.vstack(segments)
+
+    def _use(self, pool: list, count: int) -> None:
+        """Have exactly the first ``count`` shapes of ``pool`` in the space."""
+        for index, shape in enumerate(pool):
+            if index < count and shape.space is None:
+                self.space.add(shape)
+            elif index >= count and shape.space is not None:
+                self.space.remove(shape)
 
     def _build_robot(self, scenario: Scenario) -> None:
         robot = scenario.robot

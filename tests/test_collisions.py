@@ -14,6 +14,7 @@ from common.scenario import (
     BoxObstacle,
     CircleObstacle,
     LidarSpec,
+    PolygonObstacle,
     RobotProfile,
     Scenario,
     SegmentObstacle,
@@ -348,3 +349,44 @@ def test_same_scenario_and_seed_give_identical_readings():
     other = replay(make_world(**NOISY_SCENARIO_KW, seed=8), 8, commands)
     assert not np.array_equal(first[1].lidar, other[1].lidar)
     assert first[-1].odometry != other[-1].odometry
+
+
+# --- a world reused across scenarios ---------------------------------------------------------
+
+
+def _episode(world: World, actions: np.ndarray) -> list[Readings]:
+    world.reset(seed=3)
+    return [world.step(v, w) for v, w in actions]
+
+
+def test_a_loaded_world_drives_each_scenario_as_a_new_world_would():
+    # The env reuses one World across generated scenarios, reshaping its pymunk shapes in place.
+    from common.generators import generate
+
+    polygon_world = Scenario(start=(2.0, 2.0, 0.8), goal=(8.0, 8.0), obstacles=[
+        PolygonObstacle(vertices=[(4, 3), (6, 3), (6, 6), (5, 4.5), (4, 6)]),
+        SegmentObstacle(points=[(3, 6), (3, 8), (5, 9)]),
+        CircleObstacle(x=7, y=4, radius=0.5)])
+    scenarios = [generate("warehouse", 0), generate("cluttered", 1), polygon_world, generate("sparse", 2),
+                 generate("warehouse", 3), generate("open", 4)]
+    rng = np.random.default_rng(0)
+    reused = World(scenarios[0])
+    collisions = 0
+    for scenario in scenarios:
+        actions = np.column_stack([rng.uniform(0.5, 1.0, 120), rng.uniform(-1.0, 1.0, 120)])
+        reused.load(scenario)
+        loaded, fresh = _episode(reused, actions), _episode(World(scenario), actions)
+        for mine, theirs in zip(loaded, fresh):
+            assert mine.pose == theirs.pose and mine.collided == theirs.collided
+            assert_array_equal(mine.lidar, theirs.lidar)
+        collisions += loaded[-1].collided
+    assert collisions >= 4  # most episodes end against an obstacle the load moved there
+
+
+def test_a_world_loads_only_scenarios_of_its_own_robot_lidar_and_world():
+    world = make_world()
+    other = world.scenario.model_copy(update={"robot": RobotProfile(radius=0.3)})
+    assert world.accepts(world.scenario.model_copy(update={"obstacles": [CircleObstacle(x=3, y=3, radius=1)]}))
+    assert not world.accepts(other)
+    with pytest.raises(ValueError, match="same robot"):
+        world.load(other)
