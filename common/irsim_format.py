@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
+from numba import njit
 from pydantic import BaseModel, ValidationError
 
 from common.errors import ConfigError, quote
@@ -119,7 +120,12 @@ class _Draws:
 
     def __init__(self, seed: int | None) -> None:
         self.rng = np.random.default_rng(seed)
+        self.shapes: dict[tuple[int, tuple[str, ...]], _Shape] = {}  # fixed shapes read so far, by mapping
         self._left = {"objects": MAX_OBJECTS, "vertices": MAX_TOTAL_VERTICES, "checks": MAX_PLACEMENT_CHECKS}
+
+    def left(self, what: str) -> int:
+        """What is left of the budget for ``what``."""
+        return self._left[what]
 
     def spend(self, what: str, amount: int, path: str, advice: str) -> None:
         """Take ``amount`` of ``what`` from the budget, or fail naming ``path``."""
@@ -145,7 +151,9 @@ def _join(path: str, key: str) -> str:
 
 
 def _is_number(value: Any) -> bool:
-    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+    # The exact-type test first: an abstract-class check costs a microsecond, and a random world
+    # file has thousands of numbers to read per layout.
+    return type(value) in (float, int) or (isinstance(value, numbers.Real) and not isinstance(value, bool))
 
 
 def _number(value: Any, path: str, low: float | None = None, strict: bool = False, allow_inf: bool = False) -> float:
@@ -187,6 +195,8 @@ def _vector(value: Any, path: str, size: int | None = None, min_size: int = 0, a
     wanted = f"{size} numbers" if size is not None else f"at least {min_size} numbers" if min_size else "numbers"
     if not isinstance(value, (list, tuple)) or (size is not None and len(value) != size) or len(value) < min_size:
         raise _fail(path, f"expected a list of {wanted} (got {quote(value)})")
+    if all(type(v) in (float, int) for v in value) and all(math.isfinite(v) for v in value):
+        return [float(v) for v in value]  # the common case, without naming each entry's path
     return [_number(v, f"{path}[{i}]", allow_inf=allow_inf) for i, v in enumerate(value)]
 
 
@@ -299,43 +309,41 @@ def _random_points(draws: _Draws, low: list[float], high: list[float], number: i
     """IR-SIM's rejection sampling: up to 1000 draws per point for an xy spacing of ``min_distance``;
     when all fail the last draw is kept. Spacing checks count against the file's budget, so an
     impossible spacing is an error within a fraction of a second rather than minutes of draws."""
-    tries = 1000
-    rng = draws.rng
-    low3 = np.asarray(low[:3], dtype=float)
-    span = np.asarray(high[:3], dtype=float) - low3
-    advice = "a smaller min_distance, fewer objects or a wider range"
-    # IR-SIM draws one candidate at a time with rng.uniform(low, high). The candidates are drawn
-    # here in blocks with the arithmetic NumPy's uniform uses (low + span * random(), bit for bit),
-    # and at the end the generator is rewound and advanced by exactly the draws IR-SIM made.
     if number == 0:
         return []
-    saved = rng.bit_generator.state
-    candidates = low3 + span * rng.random((4 * number, 3))
-    points = np.zeros((number, 3))
-    points[0], used = candidates[0], 1
-    for i in range(1, number):
-        scanned, size = 0, 1
-        while True:
-            size = min(size, tries - scanned)
-            first = used + scanned
-            if first + size > len(candidates):
-                more = max(len(candidates), size)
-                candidates = np.concatenate([candidates, low3 + span * rng.random((more, 3))])
-            chunk = candidates[first:first + size]
-            draws.spend("checks", size * i, path, advice)
-            gaps = np.hypot(chunk[:, None, 0] - points[None, :i, 0], chunk[:, None, 1] - points[None, :i, 1])
-            accepted = np.flatnonzero(gaps.min(axis=1) >= min_distance)
-            scanned += size
-            if accepted.size or scanned >= tries:
-                # Accepted, or every try failed and the last draw is kept.
-                k = int(accepted[0]) if accepted.size else size - 1
-                points[i] = chunk[k]
-                used = first + k + 1
-                break
-            size *= 4
-    rng.bit_generator.state = saved
-    rng.random(3 * used)
+    left = draws.left("checks")
+    points, checks = _spaced_points(draws.rng, np.asarray(low[:3], dtype=float), np.asarray(high[:3], dtype=float),
+                                    number, min_distance, left)
+    draws.spend("checks", checks, path, "a smaller min_distance, fewer objects or a wider range")
     return points.tolist()
+
+
+@njit(cache=True)
+def _spaced_points(rng, low: np.ndarray, high: np.ndarray, number: int, min_distance: float,
+                   budget: int) -> tuple[np.ndarray, int]:
+    """The points and how many spacing checks they took; stops once the checks pass ``budget``.
+
+    Each candidate is IR-SIM's ``rng.uniform(low, high)``: low + (high - low) * random() per axis,
+    the same draws bit for bit (numba shares NumPy's generator).
+    """
+    span = high - low
+    points = np.zeros((number, 3))
+    checks = 0
+    for i in range(number):
+        for _ in range(1 if i == 0 else 1000):
+            for axis in range(3):
+                points[i, axis] = low[axis] + span[axis] * rng.random()
+            checks += i
+            if checks > budget:
+                return points, checks
+            fits = True
+            for j in range(i):
+                if math.hypot(points[i, 0] - points[j, 0], points[i, 1] - points[j, 1]) < min_distance:
+                    fits = False
+                    break
+            if fits:
+                break  # accepted; when all 1000 fail, the last draw is kept
+    return points, checks
 
 
 def _placements(group: dict, number: int, path: str, draws: _Draws,
@@ -421,7 +429,23 @@ def _goal(entry: Entry) -> tuple[float, float]:
 
 
 def _shape(item: _Value, draws: _Draws, allowed: tuple[str, ...]) -> _Shape:
-    """An IR-SIM ``shape`` mapping as a body-frame outline; draws random shapes from the file's generator."""
+    """An IR-SIM ``shape`` mapping as a body-frame outline; draws random shapes from the file's generator.
+
+    A group's objects share one shape mapping: a fixed shape is read once per file parse.
+    """
+    fixed = isinstance(item.value, dict) and not item.value.get("random_shape")
+    key = (id(item.value), allowed)
+    shape = draws.shapes.get(key) if fixed else None
+    if shape is None:
+        shape = _read_shape(item, draws, allowed)
+        if fixed:
+            draws.shapes[key] = shape
+    elif shape.kind in ("polygon", "linestring"):
+        draws.spend("vertices", len(shape.points), _join(item.path, "vertices"), "fewer or simpler polygons")
+    return shape
+
+
+def _read_shape(item: _Value, draws: _Draws, allowed: tuple[str, ...]) -> _Shape:
     if item.value is None:
         # IR-SIM's fallback for an object without a shape (it logs a warning).
         return _Shape("circle", np.zeros((1, 2)), radius=1.0)
@@ -521,13 +545,20 @@ def _polygon_ring(vertices: np.ndarray, path: str) -> np.ndarray:
     return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
 
 
+def _transform_point(point: np.ndarray, state: tuple[float, float, float]) -> tuple[float, float]:
+    """One point by :func:`_transform`, to the last bit (the same cosine, the same operations)."""
+    x, y, theta = state
+    c, s, px, py = float(np.cos(theta)), float(np.sin(theta)), float(point[0]), float(point[1])
+    return px * c - py * s + x, px * s + py * c + y
+
+
 def _obstacle(shape: _Shape, state: tuple[float, float, float], unobstructed: bool, shape_path: str) -> Any:
     """A shape placed at a state as a project obstacle."""
     if shape.kind == "circle":
-        x, y = _transform(shape.points, state)[0]
+        x, y = _transform_point(shape.points[0], state)
         return CircleObstacle(x=x, y=y, radius=shape.radius, unobstructed=unobstructed)
     if shape.kind == "rectangle":
-        x, y = _transform(shape.points, state)[0]
+        x, y = _transform_point(shape.points[0], state)
         return BoxObstacle(x=x, y=y, length=shape.length, width=shape.width, yaw=state[2], unobstructed=unobstructed)
     if shape.kind == "polygon":
         ring = _polygon_ring(shape.points, _join(shape_path, "vertices"))
