@@ -120,7 +120,7 @@ class WarehouseNavEnv(NavigationEnv):
 
     def _load(self, scenario: Scenario) -> None:
         super()._load(scenario)
-        if self.camera:
+        if self.camera and not isinstance(self.layout, CameraLayout):  # the base keeps a layout while it fits
             camera = self.world.camera
             self.layout = CameraLayout(self.layout, camera.width, camera.height, camera.far)
 
