@@ -1,13 +1,13 @@
 """The generators' obstacle layouts, compiled: proposals drawn and placed in one loop.
 
-A warehouse rejects a couple of hundred proposals before its 31 obstacles fit. As Python calls
-each proposal cost 10-20 µs (its draws, its tuple, its call into the gap check), which was most of
-a new scenario's cost. Here the whole loop runs compiled on the caller's ``numpy.random.Generator``
+A warehouse rejects a couple of hundred proposals before its 31 obstacles fit. In Python each
+proposal cost 10-20 µs (its draws, its tuple, its call into the gap check): most of a new
+scenario's cost. Here the whole loop runs compiled on the caller's ``numpy.random.Generator``
 (numba shares its bit generator and draws as NumPy does, bit for bit), so a seed gives the same
 layout as the Python loop it replaced.
 
-A layout is a list of steps, each ``(recipe, count, tries)``: place ``count`` shapes of a recipe,
-each from at most ``tries`` proposals. Recipes, by integer code:
+A layout is a sequence of :class:`Step`: place ``count`` shapes of a recipe, each from at most
+``tries`` proposals. Recipes, by integer code:
 
 ==================  ==========================================================================
 ``CIRCLE_NEAR``     a circle (its radius in ``radius``) near the start-goal route
