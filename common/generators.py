@@ -25,9 +25,9 @@ Split = Literal["train", "eval"]
 KINDS = ("open", "sparse", "cluttered", "warehouse", "trap")
 _SPLIT_IDS = {"train": 0, "eval": 1}
 _MAX_ATTEMPTS = 200
-# Kinds whose layouts check their own reachability and keep every obstacle the robot's radius +
-# 0.3 m from the start and the goal, more than Scenario.check asks: checking again cost a third of
-# a warehouse's generation.
+# Kinds whose layouts check their own reachability, keep start and goal inside the world and every
+# obstacle the robot's radius + 0.3 m from them (more than Scenario.check asks): checking again
+# cost a third of a warehouse's generation.
 _CHECKED_BY_LAYOUT = frozenset({"open", "sparse", "cluttered", "warehouse"})
 
 
@@ -37,8 +37,10 @@ def _placed(template: Scenario, rng: np.random.Generator, min_distance: float, *
     world = template.world
     robot_radius = template.robot.bounding_radius
     layout = lay_out(rng, (*world.offset, world.width, world.height), min_distance, steps, robot_radius)
+    if layout is None or not (world.contains(*layout.start[:2]) and world.contains(*layout.goal)):
+        return None
     # Reachability is judged on the layout's arrays, before any obstacle is built.
-    if layout is None or not path_exists(shapes_grid(world, layout.kinds, layout.params, 0.1, robot_radius),
+    if not path_exists(shapes_grid(world, layout.kinds, layout.params, 0.1, robot_radius),
                                          layout.start, layout.goal, template.goal_threshold):
         return None
     return layout.start, layout.goal, _obstacles(layout)

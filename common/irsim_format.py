@@ -120,7 +120,7 @@ class _Draws:
 
     def __init__(self, seed: int | None) -> None:
         self.rng = np.random.default_rng(seed)
-        self.shapes: dict[tuple[int, tuple[str, ...]], _Shape] = {}  # fixed shapes read so far, by mapping
+        self.shapes: dict[tuple[int, tuple[str, ...]], tuple[dict, _Shape]] = {}  # fixed shapes read, by mapping
         self._left = {"objects": MAX_OBJECTS, "vertices": MAX_TOTAL_VERTICES, "checks": MAX_PLACEMENT_CHECKS}
 
     def left(self, what: str) -> int:
@@ -433,13 +433,13 @@ def _shape(item: _Value, draws: _Draws, allowed: tuple[str, ...]) -> _Shape:
 
     A group's objects share one shape mapping: a fixed shape is read once per file parse.
     """
-    fixed = isinstance(item.value, dict) and not item.value.get("random_shape")
+    if not isinstance(item.value, dict) or item.value.get("random_shape"):
+        return _read_shape(item, draws, allowed)
     key = (id(item.value), allowed)
-    shape = draws.shapes.get(key) if fixed else None
-    if shape is None:
+    mapping, shape = draws.shapes.get(key, (None, None))
+    if mapping is not item.value:  # the cache holds the mapping, so an id reused after it is gone cannot match
         shape = _read_shape(item, draws, allowed)
-        if fixed:
-            draws.shapes[key] = shape
+        draws.shapes[key] = (item.value, shape)
     elif shape.kind in ("polygon", "linestring"):
         draws.spend("vertices", len(shape.points), _join(item.path, "vertices"), "fewer or simpler polygons")
     return shape

@@ -32,6 +32,7 @@ from numba import njit
 from common.placement import BOX, CIRCLE, OUTLINE_POINTS, place
 
 CIRCLE_NEAR, CIRCLE_ANY, MIXED_NEAR, MIXED_ANY, SHELF, PILLAR, CRATE = range(7)
+END_MARGIN = 1.0  # m: how far inside the world the start and the goal are drawn
 
 
 class Step(NamedTuple):
@@ -126,7 +127,7 @@ def _lay_out(rng, world: np.ndarray, min_distance: float, recipes: np.ndarray, c
              params: np.ndarray) -> tuple[np.ndarray, int]:
     """Draw the start and goal, then place every step's shapes into ``kinds`` and ``params``: the
     start and goal (as ``_start_goal`` gives them) and how many shapes were placed."""
-    ends_drawn = _start_goal(rng, world, min_distance, 1.0)
+    ends_drawn = _start_goal(rng, world, min_distance, END_MARGIN)
     ends = np.array([[ends_drawn[0], ends_drawn[1]], [ends_drawn[3], ends_drawn[4]]])
     clearance = 2.0 * robot_radius + 0.05
     low = np.array([world[0] + clearance, world[1] + clearance])
@@ -161,11 +162,14 @@ class Layout(NamedTuple):
 @lru_cache(maxsize=64)
 def _step_arrays(steps: tuple[Step, ...]) -> tuple[np.ndarray, ...]:
     """The steps as the kernel reads them (a curriculum asks for the same few lists again and again)."""
-    return (np.array([s.recipe for s in steps], dtype=np.int64), np.array([s.count for s in steps], dtype=np.int64),
-            np.array([s.tries for s in steps], dtype=np.int64),
-            np.array([(*s.radius, *s.side) for s in steps], dtype=float).reshape(-1, 4),
-            np.array([s.spread for s in steps], dtype=float),
-            np.repeat(np.array([s.height for s in steps], dtype=float), [s.count for s in steps]))
+    arrays = (np.array([s.recipe for s in steps], dtype=np.int64), np.array([s.count for s in steps], dtype=np.int64),
+              np.array([s.tries for s in steps], dtype=np.int64),
+              np.array([(*s.radius, *s.side) for s in steps], dtype=float).reshape(-1, 4),
+              np.array([s.spread for s in steps], dtype=float),
+              np.repeat(np.array([s.height for s in steps], dtype=float), [s.count for s in steps]))
+    for array in arrays:
+        array.flags.writeable = False  # shared by every call with these steps
+    return arrays
 
 
 def lay_out(rng: np.random.Generator, world: tuple[float, float, float, float], min_distance: float,
@@ -174,11 +178,12 @@ def lay_out(rng: np.random.Generator, world: tuple[float, float, float, float], 
     if less) and every step's shapes placed around them, in the world (x0, y0, width, height);
     None if a shape found no place.
 
-    Start and goal lie 1 m inside the world. Shapes keep a robot's diameter (plus 5 cm) from each
+    Start and goal are drawn ``END_MARGIN`` inside the world (in a world narrower than twice that,
+    they may fall outside it: the caller checks). Shapes keep a robot's diameter (plus 5 cm) from each
     other and from the walls, and the robot's radius plus 0.3 m from the start and the goal.
     """
     x0, y0, width, height = world
-    min_distance = min(min_distance, 0.9 * math.hypot(width - 2.0, height - 2.0))
+    min_distance = min(min_distance, 0.9 * math.hypot(width - 2.0 * END_MARGIN, height - 2.0 * END_MARGIN))
     recipes, counts, tries, sizes, spreads, heights = _step_arrays(steps)
     total = int(counts.sum())
     kinds, params = np.zeros(total, dtype=np.int64), np.zeros((total, 5))

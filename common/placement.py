@@ -13,22 +13,15 @@ import math
 import numpy as np
 from numba import njit
 
-from common.geometry import box_distance, box_sdf, circle_distance, circle_sdf
+from common.geometry import box_distance, circle_distance
 
 CIRCLE, BOX = 0, 1
 
 
 @njit(cache=True)
-def shape_sdf(kind: int, params: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Signed distance from points (N, 2) to a circle (x, y, radius, _, _) or box (x, y, length, width, yaw)."""
-    if kind == CIRCLE:
-        return circle_sdf(points, params[0], params[1], params[2])
-    return box_sdf(points, params[0], params[1], params[2], params[3], params[4])
-
-
-@njit(cache=True)
 def any_within(kind: int, params: np.ndarray, points: np.ndarray, limit: float) -> bool:
-    """Whether any of ``shape_sdf``'s distances is below ``limit``; stops at the first that is."""
+    """Whether any of the points (N, 2) lies nearer than ``limit`` to the shape (a circle or a box
+    as a kind and five parameters); stops at the first that does."""
     if kind == CIRCLE:
         for i in range(points.shape[0]):
             if circle_distance(points[i, 0], points[i, 1], params[0], params[1], params[2]) < limit:

@@ -271,8 +271,10 @@ class World:
                 hits = [(hit.alpha, shape) for shape in candidates
                         if (hit := shape.segment_query(previous[:2], pose[:2], self._sweep_radius))]
                 if hits:
-                    alpha, shape = min(hits, key=lambda hit: hit[0])
-                    return _between(previous, pose, alpha), {shape}
+                    # Every shape touched at the earliest point, so a tie does not depend on the
+                    # order shapes entered the space (a reused world adds them in another order).
+                    alpha = min(hit[0] for hit in hits)
+                    return _between(previous, pose, alpha), {shape for at, shape in hits if at == alpha}
             elif touched := self._touching(pose):
                 return pose, touched
             previous = pose

@@ -354,6 +354,12 @@ def test_same_scenario_and_seed_give_identical_readings():
 # --- a world reused across scenarios ---------------------------------------------------------
 
 
+def _space_shapes(world: World) -> list[tuple]:
+    """Each static shape of the world's space (all but the robot) as its type and bounding box, sorted."""
+    return sorted((type(shape).__name__, *(round(v, 9) for v in shape.cache_bb()))
+                  for shape in world.space.shapes if shape.body is world.space.static_body)
+
+
 def _episode(world: World, actions: np.ndarray) -> list[Readings]:
     world.reset(seed=3)
     return [world.step(v, w) for v, w in actions]
@@ -380,6 +386,8 @@ def test_a_loaded_world_drives_each_scenario_as_a_new_world_would():
             assert mine.pose == theirs.pose and mine.collided == theirs.collided
             assert_array_equal(mine.lidar, theirs.lidar)
         collisions += loaded[-1].collided
+        # The pymunk space itself holds the same shapes where a new world's does (no stale ones).
+        assert _space_shapes(reused) == _space_shapes(World(scenario))
     assert collisions >= 4  # most episodes end against an obstacle the load moved there
 
 

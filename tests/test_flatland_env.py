@@ -117,6 +117,25 @@ def test_a_mix_of_kinds_draws_each_by_weight():
     assert set(kinds) == {"cluttered", "trap"} and 0.6 < kinds.count("cluttered") / len(kinds) < 0.9
 
 
+def test_a_new_robot_or_lidar_gets_its_own_world_observation_and_action_mapping():
+    # The env reuses its world, layout and mapping only while the robot and lidar stay the same.
+    from common.scenario import LidarSpec, RobotProfile
+
+    slow_short = Scenario(robot=RobotProfile(v_max=0.5), lidar=LidarSpec(range_max=2.0), start=(3, 5, 0), goal=(8, 5))
+    fast_long = slow_short.model_copy(update={"robot": RobotProfile(v_max=2.0), "lidar": LidarSpec(range_max=8.0)})
+    env = make(world=[slow_short, fast_long], observation="lidar43").unwrapped
+    seen = set()
+    for seed in range(12):
+        observation, _ = env.reset(seed=seed)
+        scenario = env.scenario
+        seen.add(scenario.robot.v_max)
+        assert env.actions.to_velocity(np.array([1.0, 0.0]))[0] == scenario.robot.v_max
+        assert env.world.scenario is scenario and env.world.lidar.spec.range_max == scenario.lidar.range_max
+        # The nearest wall is 3 m away: beyond a 2 m lidar (every sector reads 1), within an 8 m one.
+        assert (observation[6:42].min() == 1.0) == (scenario.lidar.range_max == 2.0)
+    assert seen == {0.5, 2.0}
+
+
 def test_human_render_mode_runs_headless(monkeypatch):
     """The human path draws into a pyplot figure; under the Agg backend it must run without a display."""
     import matplotlib

@@ -41,6 +41,13 @@ def test_generated_scenarios_round_trip_and_are_valid(kind, tmp_path):
     assert goal_reachable(scenario)
 
 
+def test_a_world_too_small_for_the_start_and_goal_margins_is_refused():
+    # Start and goal are drawn 1 m inside the world: a 0.9 m world has no such place.
+    tiny = Scenario(world={"width": 0.9, "height": 0.9, "walls": False}, start=(0.45, 0.45, 0.0), goal=(0.5, 0.5))
+    with pytest.raises(RuntimeError, match="no reachable open layout"):
+        generate("open", 0, template=tiny)
+
+
 @pytest.mark.parametrize("kind", KINDS)
 def test_generators_are_deterministic_and_seed_sensitive(kind):
     assert generate(kind, 7) == generate(kind, 7)
@@ -60,6 +67,29 @@ def test_the_generated_scenarios_are_the_ones_the_figures_were_measured_on(kind)
     drawn = [generate(kind, seed, difficulty, split).model_dump(mode="json")
              for split in ("train", "eval") for seed in range(20)]
     assert hashlib.sha256(json.dumps(drawn, sort_keys=True).encode()).hexdigest()[:16] == SUITE_DIGESTS[kind]
+
+
+# The same for the ends of the difficulty range and for physics3d's template (its robot's larger
+# footprint sets the gaps): 10 train and 10 eval scenarios each, as 28be363's generators drew them.
+EDGE_DIGESTS = {
+    "open": ("bf95db95934438ef", "33b409d750e5806f", "60f37bfa0dfe7537"),
+    "sparse": ("a880b0b5db84a880", "b4475c40ae7639a1", "0ce8d2a853ed6c06"),
+    "cluttered": ("1ac768cf125fac61", "32d9b293c6c95618", "c76996cd7e070e21"),
+    "warehouse": ("6790129ec960dd0f", "1c8057ebaa79ed0f", "17bf7dd8d265cc77"),
+    "trap": ("3e84e209176d1e51", "245e0cf15e4c4755", "b318b182e07cd049"),
+}
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_easiest_hardest_and_3d_robot_scenarios_are_unchanged(kind):
+    from physics3d.robot import TEMPLATE
+
+    def digest(difficulty: float, template: Scenario | None = None) -> str:
+        drawn = [generate(kind, seed, difficulty, split, template).model_dump(mode="json")
+                 for split in ("train", "eval") for seed in range(10)]
+        return hashlib.sha256(json.dumps(drawn, sort_keys=True).encode()).hexdigest()[:16]
+
+    assert (digest(0.0), digest(1.0), digest(0.5, TEMPLATE)) == EDGE_DIGESTS[kind]
 
 
 def test_train_and_eval_splits_differ_for_the_same_seed():
