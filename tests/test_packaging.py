@@ -82,3 +82,38 @@ def test_what_stable_baselines3_needs_for_our_runs_is_declared():
     # A run logs to TensorBoard and shows SB3's progress bar: SB3 imports these only then, so a
     # missing one passed every import check and failed a new user's first run.
     assert {"tensorboard", "tqdm", "rich"} <= _declared()
+
+
+def test_every_module_with_cached_kernels_is_watched_for_source_changes():
+    from common.kernel_cache import KERNEL_MODULES
+
+    cached = {str(path.relative_to(ROOT)) for package in PACKAGES for path in (ROOT / package).rglob("*.py")
+              if re.search(r"@njit\([^)]*cache=True", path.read_text())}
+    assert cached == set(KERNEL_MODULES)
+
+
+def test_a_changed_kernel_source_clears_the_stale_compiled_kernels(tmp_path):
+    # numba would load a kernel compiled against a callee's old source: refresh() must delete it.
+    from common.kernel_cache import refresh
+
+    modules = ("common/geometry.py", "common/occupancy.py")
+    for module in modules:
+        (tmp_path / module).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / module).write_text("def f(): return 1\n")
+    cache = tmp_path / "common" / "__pycache__"
+    cache.mkdir()
+
+    def compiled() -> list[Path]:
+        for name in ("occupancy._rasterise-131.py311.nbi", "occupancy._rasterise-131.py311.1.nbc"):
+            (cache / name).touch()
+        return sorted(cache.glob("*.nb?"))
+
+    other = cache / "occupancy.cpython-311.pyc"
+    other.touch()
+    assert refresh(tmp_path, modules) and not list(cache.glob("*.nb?"))  # no record yet: cleared
+    kept = compiled()
+    assert not refresh(tmp_path, modules) and sorted(cache.glob("*.nb?")) == kept  # unchanged: kept
+    (tmp_path / "common" / "geometry.py").write_text("def f(): return 2\n")  # a callee's module changes
+    assert refresh(tmp_path, modules) and not list(cache.glob("*.nb?")) and other.exists()
+    compiled()
+    assert not refresh(tmp_path, modules) and len(list(cache.glob("*.nb?"))) == 2
