@@ -25,23 +25,23 @@ Split = Literal["train", "eval"]
 KINDS = ("open", "sparse", "cluttered", "warehouse", "trap")
 _SPLIT_IDS = {"train": 0, "eval": 1}
 _MAX_ATTEMPTS = 200
-# Kinds whose layouts check their own reachability, keep start and goal inside the world and every
-# obstacle the robot's radius + 0.3 m from them (more than Scenario.check asks): checking again
-# cost a third of a warehouse's generation.
-_CHECKED_BY_LAYOUT = frozenset({"open", "sparse", "cluttered", "warehouse"})
 
 
 def _placed(template: Scenario, rng: np.random.Generator, min_distance: float, *steps: Step) -> tuple | None:
     """A start and goal ``min_distance`` apart and the steps' obstacles around them, or None if one
-    found no place or the goal cannot be reached."""
+    found no place or the goal cannot be reached.
+
+    The placement keeps every obstacle the robot's radius + 0.3 m from start and goal, more than
+    ``Scenario.check`` asks, so only their being inside the world is checked here (checking the
+    whole scenario again cost a third of a warehouse's generation)."""
     world = template.world
     robot_radius = template.robot.bounding_radius
     layout = lay_out(rng, (*world.offset, world.width, world.height), min_distance, steps, robot_radius)
     if layout is None or not (world.contains(*layout.start[:2]) and world.contains(*layout.goal)):
         return None
     # Reachability is judged on the layout's arrays, before any obstacle is built.
-    if not path_exists(shapes_grid(world, layout.kinds, layout.params, 0.1, robot_radius),
-                                         layout.start, layout.goal, template.goal_threshold):
+    if not path_exists(shapes_grid(world, layout.kinds, layout.params, 0.1, robot_radius), layout.start, layout.goal,
+                       template.goal_threshold):
         return None
     return layout.start, layout.goal, _obstacles(layout)
 
@@ -81,7 +81,7 @@ def _warehouse(template: Scenario, rng: np.random.Generator, difficulty: float) 
                    Step(CRATE, 20, tries=200, side=(0.3, 0.7), height=0.6))
 
 
-def _trap(template: Scenario, rng: np.random.Generator, difficulty: float) -> tuple:
+def _trap(template: Scenario, rng: np.random.Generator, difficulty: float) -> tuple | None:
     """A U whose cavity faces the start with the goal behind its base, or two twin obstacles whose
     repulsions cancel on the start-goal line: both hold a potential field in a local minimum."""
     world = template.world
@@ -108,9 +108,16 @@ def _trap(template: Scenario, rng: np.random.Generator, difficulty: float) -> tu
         offset = radius + 0.5 * template.robot.bounding_radius
         obstacles = [CircleObstacle(x=to_world(0.0, side * offset)[0], y=to_world(0.0, side * offset)[1], radius=radius)
                      for side in (-1.0, 1.0)]
-    return (float(start[0]), float(start[1]), float(start[2])), goal, obstacles
+    return _checked(template, (float(start[0]), float(start[1]), float(start[2])), goal, obstacles)
 
 
+def _checked(template: Scenario, start: tuple, goal: tuple, obstacles: list[Obstacle]) -> tuple | None:
+    """The layout if its start and goal are clear of the obstacles and the goal is reachable, else None."""
+    scenario = template.model_copy(update=dict(start=start, goal=goal, obstacles=obstacles))
+    return (start, goal, obstacles) if _valid(scenario) and goal_reachable(scenario) else None
+
+
+# Each returns (start, goal, obstacles) already checked (clear and reachable), or None to redraw.
 _GENERATORS: dict[str, Callable[[Scenario, np.random.Generator, float], tuple | None]] = {
     "open": _open, "sparse": _sparse, "cluttered": _cluttered, "warehouse": _warehouse, "trap": _trap,
 }
@@ -137,8 +144,7 @@ def generate(kind: str, seed: int, difficulty: float = 0.5, split: Split = "trai
         scenario = template.model_copy(update=dict(
             name=f"{kind}-{split}-{seed}", kind=kind, difficulty=difficulty, seed=seed,
             start=tuple(float(v) for v in start), goal=(float(goal[0]), float(goal[1])), obstacles=obstacles))
-        if kind in _CHECKED_BY_LAYOUT or (_valid(scenario) and goal_reachable(scenario)):
-            return scenario
+        return scenario
     raise RuntimeError(f"no reachable {kind} layout in {_MAX_ATTEMPTS} attempts (seed {seed})")
 
 

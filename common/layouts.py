@@ -182,7 +182,7 @@ def lay_out(rng: np.random.Generator, world: tuple[float, float, float, float], 
     they may fall outside it: the caller checks). Shapes keep a robot's diameter (plus 5 cm) from each
     other and from the walls, and the robot's radius plus 0.3 m from the start and the goal.
     """
-    x0, y0, width, height = world
+    width, height = world[2], world[3]
     min_distance = min(min_distance, 0.9 * math.hypot(width - 2.0 * END_MARGIN, height - 2.0 * END_MARGIN))
     recipes, counts, tries, sizes, spreads, heights = _step_arrays(steps)
     total = int(counts.sum())

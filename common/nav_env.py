@@ -13,7 +13,7 @@ import numpy as np
 
 from common.actions import ACTION_SPACE, ActionMapping
 from common.kinematics import wrap_angle
-from common.observations import DEFAULT_GOAL_DISTANCE_SCALE, make_layout
+from common.observations import DEFAULT_GOAL_DISTANCE_SCALE, ObservationLayout, make_layout
 from common.readings import Readings
 from common.rewards import Reward, StepContext
 from common.conditions import Conditions, HeadingSource
@@ -94,6 +94,10 @@ class NavigationEnv(gym.Env):
     def _build_world(self, scenario: Scenario) -> WorldLike:
         raise NotImplementedError
 
+    def _make_layout(self, scenario: Scenario) -> ObservationLayout:
+        """The observation layout for a scenario's robot and lidar (after its world is built)."""
+        return make_layout(self.observation_name, scenario.robot, scenario.lidar, self.goal_distance_scale)
+
     def _load(self, drawn: Scenario) -> None:
         """Build the world, observation layout and action mapping for a drawn scenario, under the
         env's conditions (``self.scenario`` is the scenario as conditioned: robot, sensor noise)."""
@@ -102,7 +106,7 @@ class NavigationEnv(gym.Env):
         self.scenario = scenario = self.conditions.scenario(drawn)
         self.world = self._build_world(scenario)
         if previous is None or scenario.robot != previous.robot or scenario.lidar != previous.lidar:
-            self.layout = make_layout(self.observation_name, scenario.robot, scenario.lidar, self.goal_distance_scale)
+            self.layout = self._make_layout(scenario)
             self.actions = ActionMapping(scenario.robot, self.action_mapping)
         self._goal = scenario.goal
         self._threshold = scenario.goal_threshold

@@ -118,11 +118,12 @@ class WarehouseNavEnv(NavigationEnv):
         self.world.load(scenario)
         return self.world
 
-    def _load(self, scenario: Scenario) -> None:
-        super()._load(scenario)
-        if self.camera and not isinstance(self.layout, CameraLayout):  # the base keeps a layout while it fits
-            camera = self.world.camera
-            self.layout = CameraLayout(self.layout, camera.width, camera.height, camera.far)
+    def _make_layout(self, scenario: Scenario) -> ObservationLayout | CameraLayout:
+        layout = super()._make_layout(scenario)
+        if not self.camera:
+            return layout
+        camera = self.world.camera
+        return CameraLayout(layout, camera.width, camera.height, camera.far)
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None or self.readings is None:
