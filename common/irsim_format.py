@@ -30,8 +30,9 @@ from __future__ import annotations
 
 import math
 import numbers
+import operator
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, Callable, Hashable, NamedTuple
 
 import numpy as np
 from numba import njit
@@ -115,12 +116,38 @@ class _Shape(NamedTuple):
 Entry = dict[str, _Value]  # one object's keys after IR-SIM's per-object fan-out
 
 
-class _Draws:
-    """The file's random generator, and what placing and shaping its objects may still cost."""
+class ReadCache:
+    """Reads of an IR-SIM file's values, reused while the same value objects come back: a group's
+    objects share one shape or kinematics mapping, and the seeds of one file share all but what
+    they draw (:class:`common.world_file.WorldFile` keeps one cache per file, so a new layout
+    re-reads only its draws). Keyed by identity, which assumes the parsed YAML is not changed
+    between parses; it holds the values, so an id reused after one is gone cannot match."""
 
-    def __init__(self, seed: int | None) -> None:
+    MAX_ENTRIES = 4096  # random shapes bring new objects every parse; past this, start afresh
+
+    def __init__(self) -> None:
+        self._done: dict[tuple, tuple[tuple, Any]] = {}
+
+    def once(self, what: Hashable, values: tuple, read: Callable[[], Any]) -> Any:
+        """``read()``, a function of ``values`` only (paths aside, which only errors name), done
+        once for the same value objects. An error is not kept: it is raised again next time."""
+        key = (what, *map(id, values))
+        held, result = self._done.get(key, (None, None))
+        if held is None or not all(map(operator.is_, held, values)):
+            if len(self._done) >= self.MAX_ENTRIES:
+                self._done.clear()
+            result = read()
+            self._done[key] = (values, result)
+        return result
+
+
+class _Draws:
+    """The file's random generator, what placing and shaping its objects may still cost, and the
+    reads already done."""
+
+    def __init__(self, seed: int | None, reads: ReadCache) -> None:
         self.rng = np.random.default_rng(seed)
-        self.shapes: dict[tuple[int, tuple[str, ...]], tuple[dict, _Shape]] = {}  # fixed shapes read, by mapping
+        self.reads = reads
         self._left = {"objects": MAX_OBJECTS, "vertices": MAX_TOTAL_VERTICES, "checks": MAX_PLACEMENT_CHECKS}
 
     def left(self, what: str) -> int:
@@ -190,13 +217,18 @@ def _text(value: Any, path: str, allowed: tuple[str, ...] | None = None) -> str:
     return value
 
 
+_PLAIN_NUMBERS = frozenset((float, int))
+
+
 def _vector(value: Any, path: str, size: int | None = None, min_size: int = 0, allow_inf: bool = False) -> list[float]:
     """A list of numbers, of exactly ``size`` entries or at least ``min_size``."""
-    wanted = f"{size} numbers" if size is not None else f"at least {min_size} numbers" if min_size else "numbers"
     if not isinstance(value, (list, tuple)) or (size is not None and len(value) != size) or len(value) < min_size:
+        wanted = f"{size} numbers" if size is not None else f"at least {min_size} numbers" if min_size else "numbers"
         raise _fail(path, f"expected a list of {wanted} (got {quote(value)})")
-    if all(type(v) in (float, int) for v in value) and all(math.isfinite(v) for v in value):
-        return [float(v) for v in value]  # the common case, without naming each entry's path
+    if _PLAIN_NUMBERS.issuperset(map(type, value)) and math.isfinite(sum(value)):
+        # The common case, without naming each entry's path (a finite sum: no NaN or inf, and an
+        # overflowing one just takes the checked path).
+        return [float(v) for v in value]
     return [_number(v, f"{path}[{i}]", allow_inf=allow_inf) for i, v in enumerate(value)]
 
 
@@ -228,6 +260,8 @@ def _check_keys(mapping: dict, allowed: tuple[str, ...], path: str) -> None:
 
 def _fit3(values: list[float]) -> tuple[float, float, float]:
     """IR-SIM's state fitting: zero-padded or truncated to x, y, theta."""
+    if len(values) >= 3:
+        return values[0], values[1], values[2]
     x, y, theta = (list(values) + [0.0, 0.0, 0.0])[:3]
     return x, y, theta
 
@@ -305,45 +339,57 @@ def _sensor_fan_out(value: Any, number: int, path: str) -> list[_Value]:
 
 
 def _random_points(draws: _Draws, low: list[float], high: list[float], number: int,
-                   min_distance: float, path: str) -> list[list[float]]:
-    """IR-SIM's rejection sampling: up to 1000 draws per point for an xy spacing of ``min_distance``;
-    when all fail the last draw is kept. Spacing checks count against the file's budget, so an
-    impossible spacing is an error within a fraction of a second rather than minutes of draws."""
+                   min_distance: float, path: str) -> tuple[list[list[float]], list[list[float]]]:
+    """IR-SIM's rejection sampling of a group's states, then of its goals: up to 1000 draws per
+    point for an xy spacing of ``min_distance`` within each set; when all fail the last draw is
+    kept. Spacing checks count against the file's budget, so an impossible spacing is an error
+    within a fraction of a second rather than minutes of draws."""
     if number == 0:
-        return []
+        return [], []
     left = draws.left("checks")
     points, checks = _spaced_points(draws.rng, np.asarray(low[:3], dtype=float), np.asarray(high[:3], dtype=float),
                                     number, min_distance, left)
     draws.spend("checks", checks, path, "a smaller min_distance, fewer objects or a wider range")
-    return points.tolist()
+    states, goals = points.tolist()
+    return states, goals
+
+
+@njit(cache=True, inline="always")
+def _too_close(dx: float, dy: float, min_distance: float) -> bool:
+    """IR-SIM's spacing rule to the last bit: ``np.linalg.norm`` of the xy difference, i.e. the
+    square root of the sum of squares (not ``hypot``, which rounds differently and is slower)."""
+    return math.sqrt(dx * dx + dy * dy) < min_distance
 
 
 @njit(cache=True)
 def _spaced_points(rng, low: np.ndarray, high: np.ndarray, number: int, min_distance: float,
                    budget: int) -> tuple[np.ndarray, int]:
-    """The points and how many spacing checks they took; stops once the checks pass ``budget``.
+    """Two sets of ``number`` points (states, then goals) and how many spacing checks they took;
+    stops once the checks pass ``budget``. (One call for both: passing a Generator to a compiled
+    function costs 25 µs.)
 
     Each candidate is IR-SIM's ``rng.uniform(low, high)``: low + (high - low) * random() per axis,
     the same draws bit for bit (numba shares NumPy's generator).
     """
     span = high - low
-    points = np.zeros((number, 3))
+    sets = np.zeros((2, number, 3))
     checks = 0
-    for i in range(number):
-        for _ in range(1 if i == 0 else 1000):
-            for axis in range(3):
-                points[i, axis] = low[axis] + span[axis] * rng.random()
-            checks += i
-            if checks > budget:
-                return points, checks
-            fits = True
-            for j in range(i):
-                if math.hypot(points[i, 0] - points[j, 0], points[i, 1] - points[j, 1]) < min_distance:
-                    fits = False
-                    break
-            if fits:
-                break  # accepted; when all 1000 fail, the last draw is kept
-    return points, checks
+    for points in sets:
+        for i in range(number):
+            for _ in range(1 if i == 0 else 1000):
+                for axis in range(3):
+                    points[i, axis] = low[axis] + span[axis] * rng.random()
+                checks += i
+                if checks > budget:
+                    return sets, checks
+                fits = True
+                for j in range(i):
+                    if _too_close(points[i, 0] - points[j, 0], points[i, 1] - points[j, 1], min_distance):
+                        fits = False
+                        break
+                if fits:
+                    break  # accepted; when all 1000 fail, the last draw is kept
+    return sets, checks
 
 
 def _placements(group: dict, number: int, path: str, draws: _Draws,
@@ -371,8 +417,7 @@ def _placements(group: dict, number: int, path: str, draws: _Draws,
         high = _vector(distribution.get("range_high", default_high), at("range_high"), min_size=3)
         _bounds(low[:3], high[:3], at("range_high"))
         spacing = _number(distribution.get("min_distance", 1.0), at("min_distance"))
-        states = _random_points(draws, low, high, number, spacing, at("min_distance"))
-        goals = _random_points(draws, low, high, number, spacing, at("min_distance"))
+        states, goals = _random_points(draws, low, high, number, spacing, at("min_distance"))
         return [_Value(s, dist_path) for s in states], [_Value(g, dist_path) for g in goals]
     radius = _number(distribution.get("radius", min(width, height) / 2 - _MARGIN), at("radius"))
     cx, cy = _vector(distribution.get("center", [x0 + width / 2, y0 + height / 2]), at("center"), min_size=2)[:2]
@@ -400,6 +445,11 @@ def _expand(group: dict, path: str, draws: _Draws, world: WorldSpec) -> list[Ent
         for entry, item in zip(entries, spread(value, number, _join(path, key))):
             entry[key] = item
     return entries
+
+
+def _values(entry: Entry, keys: tuple[str, ...]) -> tuple:
+    """The value objects an entry has for ``keys`` (None where absent), to key :class:`ReadCache` reads."""
+    return tuple([getattr(entry.get(key), "value", None) for key in keys])
 
 
 def _get(entry: Entry, key: str, default: Any, path: str) -> _Value:
@@ -433,14 +483,10 @@ def _shape(item: _Value, draws: _Draws, allowed: tuple[str, ...]) -> _Shape:
 
     A group's objects share one shape mapping: a fixed shape is read once per file parse.
     """
-    if not isinstance(item.value, dict) or item.value.get("random_shape"):
+    if isinstance(item.value, dict) and item.value.get("random_shape"):
         return _read_shape(item, draws, allowed)
-    key = (id(item.value), allowed)
-    mapping, shape = draws.shapes.get(key, (None, None))
-    if mapping is not item.value:  # the cache holds the mapping, so an id reused after it is gone cannot match
-        shape = _read_shape(item, draws, allowed)
-        draws.shapes[key] = (item.value, shape)
-    elif shape.kind in ("polygon", "linestring"):
+    shape = draws.reads.once(("shape", allowed), (item.value,), lambda: _read_shape(item, draws, allowed))
+    if shape.kind in ("polygon", "linestring"):  # every object's vertices count, shared or not
         draws.spend("vertices", len(shape.points), _join(item.path, "vertices"), "fewer or simpler polygons")
     return shape
 
@@ -480,8 +526,6 @@ def _read_shape(item: _Value, draws: _Draws, allowed: tuple[str, ...]) -> _Shape
         vertices = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])  # IR-SIM's default square
     if random_shape:
         vertices = _random_polygon(shape, item.path, draws, default_convex=name == "linestring")
-    else:
-        draws.spend("vertices", len(vertices), _join(item.path, "vertices"), "fewer or simpler polygons")
     return _Shape(name, vertices)
 
 
@@ -548,7 +592,10 @@ def _polygon_ring(vertices: np.ndarray, path: str) -> np.ndarray:
 def _transform_point(point: np.ndarray, state: tuple[float, float, float]) -> tuple[float, float]:
     """One point by :func:`_transform`, to the last bit (the same cosine, the same operations)."""
     x, y, theta = state
-    c, s, px, py = float(np.cos(theta)), float(np.sin(theta)), float(point[0]), float(point[1])
+    px, py = float(point[0]), float(point[1])
+    if px == 0.0 and py == 0.0:
+        return x, y  # a centred shape: the rotation adds zeros (the sign of a zero x or y aside)
+    c, s = float(np.cos(theta)), float(np.sin(theta))
     return px * c - py * s + x, px * s + py * c + y
 
 
@@ -666,17 +713,23 @@ def _lidar(entry: Entry, path: str) -> LidarSpec:
 
 def _static_obstacle(entry: Entry, path: str, draws: _Draws, allowed: tuple[str, ...]) -> Any:
     """Any object other than the controlled robot: a static obstacle at its initial state."""
-    _kinematics_name(entry, path)
+    if "kinematics" in entry:  # most obstacles have none, which needs no reading
+        draws.reads.once("kinematics", _values(entry, ("kinematics",)), lambda: _kinematics_name(entry, path))
     item = _get(entry, "shape", None, path)
     shape = _shape(item, draws, allowed)
-    unobstructed = _flag(_get(entry, "unobstructed", False, path).value, _join(path, "unobstructed"))
+    flag = entry.get("unobstructed")
+    unobstructed = flag is not None and flag.value is not None and _flag(flag.value, flag.path)
     try:
         return _obstacle(shape, _state(entry), unobstructed, item.path)
     except ValidationError as exc:
         raise _fail(item.path, pydantic_error(None, exc).problem) from None
 
 
-def _parse(data: dict, source: str | Path | None, seed: int | None) -> Scenario:
+_DIFF_DRIVE_KEYS = ("kinematics", "static", "velocity")
+_PROFILE_KEYS = ("vel_min", "vel_max", "acce", "shape")
+
+
+def _parse(data: dict, source: str | Path | None, seed: int | None, reads: ReadCache) -> Scenario:
     prefix = ""
     if "irsim" in data:
         # IR-SIM reads only the ``irsim`` block of a file shared with another simulator.
@@ -684,15 +737,15 @@ def _parse(data: dict, source: str | Path | None, seed: int | None) -> Scenario:
     for key in data:
         if key not in TOP_KEYS:
             raise _fail(f"{prefix}{key}", f"unknown key; allowed: {', '.join(TOP_KEYS)}")
-    draws = _Draws(seed)
-    world, name = _world(data.get("world"), f"{prefix}world")
+    draws = _Draws(seed, reads)
+    world, name = reads.once("world", (data.get("world"),), lambda: _world(data.get("world"), f"{prefix}world"))
     obstacles: list[Any] = []
     robot = None
     for group, path in _groups(data.get("robot"), f"{prefix}robot"):
         for entry in _expand(group, path, draws, world):
             # Shapes are read in creation order, so random radii draw from rng as IR-SIM does.
             if robot is None:
-                _check_diff_drive(entry, path)
+                reads.once("diff drive", _values(entry, _DIFF_DRIVE_KEYS), lambda: _check_diff_drive(entry, path))
                 shape = _shape(_get(entry, "shape", None, path), draws, ROBOT_SHAPES)
                 robot = (entry, path, shape)
             else:
@@ -707,29 +760,34 @@ def _parse(data: dict, source: str | Path | None, seed: int | None) -> Scenario:
     fields = {
         "name": _Value(name or (Path(source).stem if source is not None else "irsim"), f"{prefix}world.name"),
         "world": _Value(world, f"{prefix}world"),
-        "robot": _Value(_robot_profile(entry, shape, path), path),
-        "lidar": _Value(_lidar(entry, path), _join(path, "sensors")),
+        "robot": _Value(reads.once("robot", (*_values(entry, _PROFILE_KEYS), shape),
+                                   lambda: _robot_profile(entry, shape, path)), path),
+        "lidar": _Value(reads.once("lidar", _values(entry, ("sensors",)), lambda: _lidar(entry, path)),
+                        _join(path, "sensors")),
         "start": _Value(_state(entry), _join(path, "state")),
         "goal": _Value(_goal(entry), _join(path, "goal")),
         "goal_threshold": _Value(_number(threshold.value, threshold.path, 0, strict=True), threshold.path),
         "obstacles": _Value(obstacles, f"{prefix}obstacle"),
         "kind": _Value("irsim", prefix or "world"),
-        "seed": _Value(seed if has_random_placement(data) else None, prefix or "world"),
+        "seed": _Value(seed if reads.once("random", (data,), lambda: has_random_placement(data)) else None,
+                       prefix or "world"),
     }
     return _build(Scenario, prefix.rstrip("."), fields)
 
 
-def parse_irsim(data: dict, source: str | Path | None = None, seed: int | None = 0) -> Scenario:
+def parse_irsim(data: dict, source: str | Path | None = None, seed: int | None = 0,
+                reads: ReadCache | None = None) -> Scenario:
     """A validated :class:`Scenario` from a parsed IR-SIM world YAML mapping.
 
     ``seed`` drives random placements and shapes. The start may touch an obstacle (IR-SIM allows
     it), so only types and values are checked, not geometry. Every problem is a one-line
     :class:`ConfigError` naming the field, e.g. ``obstacle[2].shape.radius: must be > 0 (got -1)``.
+    ``reads``: a :class:`ReadCache` kept between parses of the same, unchanged ``data``.
     """
     try:
         if not isinstance(data, dict):
             raise _fail(None, f"expected a YAML mapping at the top level (got {type(data).__name__})")
-        return _parse(data, source, seed)
+        return _parse(data, source, seed, ReadCache() if reads is None else reads)
     except ConfigError as exc:
         raise (exc.with_source(source) if source is not None else exc) from None
 

@@ -40,9 +40,10 @@ class WorldFile:
         self.data = read_yaml_mapping(self.path)
         self.irsim = is_irsim(self.data)
         if self.irsim:
-            from common.irsim_format import has_random_placement
+            from common.irsim_format import ReadCache, has_random_placement
 
             self.random = has_random_placement(self.data)
+            self._reads = ReadCache()  # a new seed re-reads only what it draws
         else:
             self.random = False
         self.initial = self._parse(0, warn=True)
@@ -56,7 +57,7 @@ class WorldFile:
             return scenario_from_mapping(self.data, self.path)
         from common.irsim_format import parse_irsim
 
-        scenario = parse_irsim(self.data, source=self.path, seed=seed)
+        scenario = parse_irsim(self.data, source=self.path, seed=seed, reads=self._reads)
         for problem in scenario.placement_problems(self.path) if warn else ():
             warnings.warn(f"{problem} (IR-SIM runs it as it is)", ScenarioWarning, stacklevel=3)
         return scenario

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import base64
 import json
+import math
 import pickle
 import subprocess
 import sys
@@ -53,6 +54,9 @@ HOSTILE = {
                               + "".join("  - *g\n" for _ in range(49)), "objects in all"),
     "thousands of vertices": (ROBOT + "obstacle:\n  - number: 1000\n    shape: {name: polygon, random_shape: true, "
                               "num_vertices_range: [900, 999]}\n", "polygon vertices in all"),
+    "one polygon shared by many": (ROBOT + "obstacle:\n  - number: 1000\n    distribution: {name: random, min_distance: 0}\n"
+                                   "    shape: {name: polygon, vertices: [" + ", ".join(f"[{math.cos(k / 4):.3f}, {math.sin(k / 4):.3f}]" for k in range(25)) + "]}\n",
+                                   "polygon vertices in all"),
     "crossed polygon": ("obstacles:\n  - {type: polygon, vertices: [[0, 0], [2, 2], [2, 0], [0, 2]]}\n", "crosses itself"),
 }
 

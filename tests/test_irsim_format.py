@@ -13,7 +13,7 @@ from tests.conftest import optional
 import yaml
 
 from common.errors import ConfigError
-from common.irsim_format import has_random_placement, parse_irsim
+from common.irsim_format import ReadCache, _spaced_points, _too_close, has_random_placement, parse_irsim
 from common.polygons import is_simple_polygon
 from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, SegmentObstacle
 from common.yaml_io import read_yaml_mapping
@@ -249,6 +249,63 @@ obstacle:
     assert np.all((xy >= [2, 3]) & (xy <= [8, 9]))
     gaps = np.hypot(*(xy[:, None] - xy[None]).transpose(2, 0, 1))[np.triu_indices(6, 1)]
     assert gaps.min() >= 1.5
+
+
+def test_spacing_decisions_match_irsims_rule():
+    """The compiled sampler keeps a candidate exactly when IR-SIM's random_uniform would: the
+    np.linalg.norm of its xy difference to every placed point is at least min_distance, decided
+    bit for bit even within rounding of min_distance (where hypot, say, decides differently)."""
+    low, high = np.array([0.0, 0.0, 0.0]), np.array([1.0, 1.0, 0.0])
+
+    def irsims(rng, number, spacing):
+        sets = []
+        for _ in range(2):  # states, then goals
+            points = np.zeros((3, number))
+            for i in range(number):
+                for _attempt in range(1000):
+                    candidate = rng.uniform(low, high)
+                    if i == 0 or np.min(np.linalg.norm(points[:2, :i] - candidate[:2, None], axis=0)) >= spacing:
+                        break
+                points[:, i] = candidate
+            sets.append(points.T.tolist())
+        return sets
+
+    for seed, number, spacing in ((0, 12, 0.25), (1, 30, 0.12), (2, 8, 0.0), (3, 6, 2.0)):
+        ours, _ = _spaced_points(np.random.default_rng(seed), low, high, number, spacing, 10**9)
+        assert ours.tolist() == irsims(np.random.default_rng(seed), number, spacing)
+    rng = np.random.default_rng(0)
+    for spacing in (0.25, 1.0, 1.2, 0.6, 3.7):
+        angles = rng.uniform(0, 2 * np.pi, 2000)
+        for dx, dy in zip(spacing * np.cos(angles), spacing * np.sin(angles)):
+            for x in (np.nextafter(dx, -np.inf), dx, np.nextafter(dx, np.inf)):
+                assert _too_close(x, dy, spacing) == (np.linalg.norm([x, dy]) < spacing)
+
+
+def test_a_world_files_seeds_share_the_reads_of_its_fixed_parts(tmp_path):
+    path = tmp_path / "world.yaml"
+    path.write_text(ROBOT + "  sensors: [{name: lidar2d, number: 36}]\n"
+                    "obstacle:\n  - {number: 5, distribution: {name: random}, shape: {name: circle, radius: 0.2}}\n")
+    file = WorldFile(path)
+    one, two = file.scenario(1), file.scenario(2)
+    assert one.obstacles != two.obstacles
+    assert one.robot is two.robot and one.lidar is two.lidar and one.world is two.world
+    assert one == parse_irsim(read_yaml_mapping(path), source=path, seed=1)  # as a parse without the cache
+
+
+def test_read_cache_rereads_what_changed_and_stays_bounded(tmp_path, monkeypatch):
+    text = ROBOT + "  shape: {name: circle, random_shape: true, radius_range: [0.1, 0.5]}\n  vel_max: [1, 1]\n"
+    data, reads = yaml.safe_load(text), ReadCache()
+    radii = {parse_irsim(data, seed=seed, reads=reads).robot.radius for seed in range(5)}
+    assert len(radii) == 5  # a drawn footprint is a new robot every seed, cache or not
+    faster = copy.deepcopy(data)
+    faster["robot"]["vel_max"] = [2, 1]
+    assert parse_irsim(faster, seed=1, reads=reads).robot.v_max == 2.0
+    assert parse_irsim(data, seed=1, reads=reads).robot.v_max == 1.0
+    monkeypatch.setattr(ReadCache, "MAX_ENTRIES", 6)
+    reads = ReadCache()
+    for seed in range(40):
+        assert parse_irsim(data, seed=seed, reads=reads) == parse_irsim(data, seed=seed)
+        assert len(reads._done) <= 6
 
 
 def test_random_robot_uses_world_margins(tmp_path):
