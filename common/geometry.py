@@ -63,6 +63,15 @@ def box_corner_points(x: float, y: float, length: float, width: float, yaw: floa
     return [(x + u * c - v * s, y + u * s + v * c) for u, v in ((hl, hw), (-hl, hw), (-hl, -hw), (hl, -hw))]
 
 
+@njit(cache=True)
+def segment_distance(px: float, py: float, x1: float, y1: float, x2: float, y2: float) -> float:
+    """Distance from the point (px, py) to the segment (x1, y1)-(x2, y2)."""
+    ex, ey = x2 - x1, y2 - y1
+    length_sq = ex * ex + ey * ey
+    t = 0.0 if length_sq == 0.0 else min(max(((px - x1) * ex + (py - y1) * ey) / length_sq, 0.0), 1.0)
+    return math.hypot(px - (x1 + t * ex), py - (y1 + t * ey))
+
+
 def box_corners(x: float, y: float, length: float, width: float, yaw: float) -> np.ndarray:
     """The four corners (4, 2) of a box, counter-clockwise."""
     return np.array(box_corner_points(x, y, length, width, yaw))

@@ -44,6 +44,7 @@ from typing import Callable
 
 import numpy as np
 from gymnasium import spaces
+from numba import njit
 
 from common.errors import ConfigError, quote
 from common.kinematics import wrap_angle
@@ -85,32 +86,31 @@ def _clip(out: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
     return np.maximum(out, low, out=out)
 
 
-def sector_minimum(beams: int, sectors: int) -> Callable[[np.ndarray], np.ndarray]:
-    """A function reducing a ``beams``-long scan to ``sectors`` nearest returns (identity when equal)."""
-    if beams == sectors:
-        return lambda ranges: ranges
-    if beams < sectors:
-        index = np.floor(np.arange(sectors) * beams / sectors).astype(np.intp)
-        return lambda ranges: ranges[index]
-    starts = np.floor(np.arange(sectors) * beams / sectors).astype(np.intp)
-    return lambda ranges: np.minimum.reduceat(ranges, starts)
+def sector_bounds(beams: int, sectors: int) -> np.ndarray:
+    """Rows [first, end) of the beams each of ``sectors`` sectors reads: consecutive beams when
+    there are more beams than sectors, else the beam under each sector (repeated)."""
+    starts = np.floor(np.arange(sectors) * beams / sectors).astype(np.int64)
+    ends = np.append(starts[1:], beams) if beams > sectors else starts + 1
+    return np.column_stack([starts, ends])
 
 
-def _linear_ranges(lidar: LidarSpec) -> Callable[[np.ndarray, np.ndarray], None]:
-    inv_r = 1.0 / lidar.range_max
-    return lambda ranges, out: np.multiply(ranges, inv_r, out=out)
-
-
-def _log_ranges(robot: RobotProfile, lidar: LidarSpec) -> Callable[[np.ndarray, np.ndarray], None]:
-    floor = min(robot.bounding_radius, 0.5 * lidar.range_max)
-    scale = 1.0 / math.log(lidar.range_max / floor)
-
-    def encode(ranges: np.ndarray, out: np.ndarray) -> None:
-        # Returns inside the floor (sensor noise, a lidar off the robot's centre) read 0 after clipping.
-        np.log(np.maximum(ranges, floor) * (1.0 / floor), out=out)
-        out *= scale
-
-    return encode
+@njit(cache=True)
+def _encode_sectors(out, first, ranges, bounds, inv_range, floor, log_scale, low, high):
+    """Write each sector's nearest return into out[first:], linear (r / range_max) or, with
+    ``log_scale`` > 0, log(max(r, floor) / floor) * log_scale; then clip all of ``out`` into
+    [low, high]. The rounding is NumPy's: log in float64, the scale applied in float32."""
+    inv_floor = 1.0 / floor
+    for k in range(bounds.shape[0]):
+        nearest = ranges[bounds[k, 0]]
+        for i in range(bounds[k, 0] + 1, bounds[k, 1]):
+            nearest = min(nearest, ranges[i])
+        if log_scale > 0.0:
+            # Returns inside the floor (sensor noise, a lidar off the robot's centre) read 0.
+            out[first + k] = np.float32(math.log(max(nearest, floor) * inv_floor)) * np.float32(log_scale)
+        else:
+            out[first + k] = nearest * inv_range
+    for i in range(out.shape[0]):
+        out[i] = min(max(out[i], low[i]), high[i])
 
 
 def make_layout(
@@ -133,8 +133,9 @@ def make_layout(
     elif name in ("lidar43", "lidar43_log"):
         low = np.concatenate([[-1, -1, -1, -1, -1, -1], np.zeros(LIDAR43_BEAMS + 1)]).astype(np.float32)
         high = np.ones(43, dtype=np.float32)
-        reduce = sector_minimum(lidar.beams, LIDAR43_BEAMS)
-        encode = _log_ranges(robot, lidar) if name == "lidar43_log" else _linear_ranges(lidar)
+        bounds = sector_bounds(lidar.beams, LIDAR43_BEAMS)
+        floor = min(robot.bounding_radius, 0.5 * lidar.range_max)
+        log_scale = 1.0 / math.log(lidar.range_max / floor) if name == "lidar43_log" else 0.0
 
         def compute(readings: Readings, goal: tuple[float, float]) -> np.ndarray:
             out = np.empty(43, dtype=np.float32)
@@ -142,8 +143,8 @@ def make_layout(
             out[3] = readings.odometry.v * inv_v
             out[4] = readings.odometry.w * inv_w
             out[5] = readings.imu.angular_velocity[2] * inv_w
-            encode(reduce(readings.lidar), out[6:42])
-            return _clip(out, low, high)
+            _encode_sectors(out, 6, readings.lidar, bounds, inv_r, floor, log_scale, low, high)
+            return out
 
     else:
         raise ConfigError(None, "observation", f"unknown layout {quote(name)}; allowed: {', '.join(LAYOUTS)}")

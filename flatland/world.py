@@ -23,6 +23,7 @@ from common.polygons import convex_pieces
 from common.readings import Imu, Odometry, Readings, frozen
 from common.geometry import box_corner_points
 from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, SegmentObstacle, WorldSpec
+from flatland.clearance import nothing_within
 from flatland.lidar import Lidar
 
 GRAVITY = 9.81
@@ -112,6 +113,7 @@ class World:
         circles: list[tuple[float, float, float]] = []
         boxes: list[tuple[float, ...]] = []
         segments: list[np.ndarray] = [self._wall_edges]
+        solids: list[np.ndarray] = []  # the bounds of polygons, whose outline alone leaves their inside unseen
         if self._pieces:
             self.space.remove(*self._pieces)
         self._pieces = []
@@ -144,6 +146,7 @@ class World:
                 ring, closed = np.asarray(obstacle.points, dtype=float), False
             segments.append(_edges(ring, closed))
             if closed:
+                solids.append(np.concatenate([ring.min(axis=0), ring.max(axis=0)]))
                 # pymunk collides convex shapes only.
                 self._pieces.extend(pymunk.Poly(static, [tuple(v) for v in piece]) for piece in convex_pieces(ring))
             else:
@@ -154,6 +157,7 @@ class World:
             self.space.add(*self._pieces)
         # Reshaped static shapes keep their old place in the space's index until reindexed.
         self.space.reindex_static()
+        self._solids = np.array(solids).reshape(-1, 4)
         return np.array(circles).reshape(-1, 3), np.array(boxes).reshape(-1, 6), np.vstack(segments)
 
     def _use(self, pool: list, count: int) -> None:
@@ -240,6 +244,9 @@ class World:
         # (Space.segment_query with a radius is no substitute: chipmunk walks its tree with the bare
         # segment and misses shapes that only the radius reaches.)
         reach = abs(v) * self._dt + self._sweep_radius
+        lidar = self.lidar
+        if nothing_within(start[0], start[1], reach, lidar.circles, lidar.boxes, lidar.segments, self._solids):
+            return end, False  # decided without pymunk's Python layer, which costs more than the rest of a move
         box = pymunk.BB(start[0] - reach, start[1] - reach, start[0] + reach, start[1] + reach)
         candidates = self.space.bb_query(box, self._not_robot)
         if not candidates:

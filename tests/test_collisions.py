@@ -86,6 +86,49 @@ def test_head_on_circle_stops_at_the_touching_pose_and_stays():
     assert world.readings.pose == world.scenario.start_pose
 
 
+def test_a_robot_deep_inside_a_polygon_collides_at_its_first_move():
+    """Far from every edge of a polygon it starts inside, the robot still touches it (its inside
+    counts, not just its outline), as IR-SIM judges a start inside an obstacle."""
+    square = PolygonObstacle(vertices=[(0.0, 2.0), (8.0, 2.0), (8.0, 8.0), (0.0, 8.0)])
+    world = make_world([square], start=(4.0, 5.0, 0.0))
+    assert world.step(0.5, 0.0).collided
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_clear_neighbourhood_test_agrees_with_signed_distances(seed):
+    """nothing_within is True exactly when every obstacle (and a polygon's inside) lies at least
+    ``reach`` away, up to its rounding margin; moves it clears skip pymunk, so a wrong True would
+    let a robot through an obstacle."""
+    from common.geometry import box_sdf, circle_sdf, polygon_sdf, segments_distance
+    from flatland.clearance import nothing_within
+
+    rng = np.random.default_rng(seed)
+    triangle = PolygonObstacle(vertices=[(6.0, 6.0), (9.0, 6.5), (7.0, 9.0)])
+    line = SegmentObstacle(points=[(1.0, 8.0), (3.0, 9.0), (4.0, 8.5)])
+    circles = [CircleObstacle(x=x, y=y, radius=r) for x, y, r in rng.uniform([0, 0, 0.1], [10, 10, 0.8], (4, 3))]
+    boxes = [BoxObstacle(x=x, y=y, length=a, width=b, yaw=t) for x, y, a, b, t in rng.uniform([0, 0, 0.2, 0.2, -3], [10, 10, 2, 1, 3], (4, 5))]
+    world = make_world([*circles, *boxes, triangle, line], walls=True, size=10.0)
+    points = rng.uniform(-0.5, 10.5, (3000, 2))
+    distance = np.min([
+        *(circle_sdf(points, c.x, c.y, c.radius) for c in circles),
+        *(box_sdf(points, b.x, b.y, b.length, b.width, b.yaw) for b in boxes),
+        polygon_sdf(points, np.array(triangle.vertices)),
+        segments_distance(points, np.array(line.points[:-1]), np.array(line.points[1:])),
+        segments_distance(points, world.lidar.segments[:4, :2], world.lidar.segments[:4, 2:]),
+    ], axis=0)
+    lidar = world.lidar
+    for (x, y), nearest in zip(points, distance):
+        reach = rng.uniform(0.05, 1.0)
+        clear = nothing_within(x, y, reach, lidar.circles, lidar.boxes, lidar.segments, world._solids)
+        if clear:
+            assert nearest >= reach - 1e-9
+        elif nearest > reach + 1e-6:
+            # Only a polygon's bounding box may refuse a point that is in fact clear.
+            x0, y0 = np.min(triangle.vertices, axis=0) - reach
+            x1, y1 = np.max(triangle.vertices, axis=0) + reach
+            assert x0 < x < x1 and y0 < y < y1
+
+
 def test_starting_in_contact_is_judged_after_the_first_move_as_in_irsim():
     """The start (1, 5) overlaps a circle at (1.62, 5) by 0.08 m; IR-SIM judges contact after a move."""
     circle = CircleObstacle(x=1.62, y=5.0, radius=0.5)

@@ -9,7 +9,7 @@ import pytest
 
 from common.errors import ConfigError
 from common.kinematics import Pose2D
-from common.observations import make_layout, sector_minimum
+from common.observations import make_layout
 from common.readings import Imu, Odometry, Readings
 from common.rewards import PRESETS, Reward, StepContext, resolve_reward_spec
 from common.scenario import LidarSpec, RobotProfile
@@ -42,13 +42,17 @@ def test_lidar43_layout_and_yaw_rate():
     assert obs[42] == pytest.approx(0.3)
 
 
+def _sectors(ranges: np.ndarray) -> np.ndarray:
+    """The 36 sector entries lidar43 makes of a scan (range_max 5 m)."""
+    beams = len(ranges)
+    layout = make_layout("lidar43", ROBOT, LidarSpec(beams=beams, range_max=5.0))
+    return layout(_readings(lidar=ranges, beams=beams), goal=(1, 1))[6:42]
+
+
 def test_lidar43_reduces_other_beam_counts_to_36_nearest_returns():
-    reduce = sector_minimum(72, 36)
-    ranges = np.arange(72, dtype=float)
-    np.testing.assert_array_equal(reduce(ranges), ranges[::2])
-    layout = make_layout("lidar43", ROBOT, LidarSpec(beams=720))
-    assert layout(_readings(lidar=np.full(720, 2.5), beams=720), goal=(1, 1)).shape == (43,)
-    assert sector_minimum(18, 36)(np.arange(18.0)).shape == (36,)
+    np.testing.assert_array_equal(_sectors(np.arange(72, dtype=float) / 20), (np.arange(0, 72, 2) / 100).astype(np.float32))
+    # Fewer beams than sectors: each sector reads the beam under it.
+    np.testing.assert_array_equal(_sectors(np.arange(18, dtype=float) / 4), (np.repeat(np.arange(18), 2) / 20).astype(np.float32))
 
 
 def test_lidar43_log_reads_contact_as_0_range_max_as_1_and_keeps_the_other_entries():
@@ -130,8 +134,8 @@ def test_presets_are_valid_specs():
 
 def test_a_sector_reads_its_nearest_beam_wherever_it_lies():
     ranges = np.random.default_rng(0).permutation(np.linspace(0.2, 5.0, 720))
-    np.testing.assert_array_equal(sector_minimum(720, 36)(ranges), ranges.reshape(36, 20).min(axis=1))
-    np.testing.assert_array_equal(sector_minimum(72, 36)(ranges[:72]), ranges[:72].reshape(36, 2).min(axis=1))
+    np.testing.assert_array_equal(_sectors(ranges), (ranges.reshape(36, 20).min(axis=1) / 5.0).astype(np.float32))
+    np.testing.assert_array_equal(_sectors(ranges[:72]), (ranges[:72].reshape(36, 2).min(axis=1) / 5.0).astype(np.float32))
 
 
 # -- the env's wiring: what it feeds the reward and the observation -------------------------------
