@@ -7,7 +7,9 @@ scenario's cost. Here the whole loop runs compiled on the caller's ``numpy.rando
 layout as the Python loop it replaced.
 
 A layout is a sequence of :class:`Step`: place ``count`` shapes of a recipe, each from at most
-``tries`` proposals. Recipes, by integer code:
+``tries`` proposals; a shape that finds no place fails the layout, unless its step is
+``optional`` (a warehouse's crates: a wider robot, which needs wider gaps, gets fewer of them).
+Recipes, by integer code:
 
 ==================  ==========================================================================
 ``CIRCLE_NEAR``     a circle (its radius in ``radius``) near the start-goal route
@@ -45,6 +47,7 @@ class Step(NamedTuple):
     side: tuple[float, float] = (0.0, 0.0)  # and a box's length and width from this one
     spread: float = 0.0  # how far sideways of the route a NEAR recipe may stray
     height: float = 0.5
+    optional: bool = False  # a shape that finds no place is left out instead of failing the layout
 
 
 @njit(cache=True)
@@ -123,10 +126,11 @@ def _start_goal(rng, world: np.ndarray, min_distance: float, margin: float) -> n
 
 @njit(cache=True)
 def _lay_out(rng, world: np.ndarray, min_distance: float, recipes: np.ndarray, counts: np.ndarray,
-             tries: np.ndarray, sizes: np.ndarray, spreads: np.ndarray, robot_radius: float, kinds: np.ndarray,
-             params: np.ndarray) -> tuple[np.ndarray, int]:
-    """Draw the start and goal, then place every step's shapes into ``kinds`` and ``params``: the
-    start and goal (as ``_start_goal`` gives them) and how many shapes were placed."""
+             tries: np.ndarray, optional: np.ndarray, sizes: np.ndarray, spreads: np.ndarray, robot_radius: float,
+             kinds: np.ndarray, params: np.ndarray, steps: np.ndarray) -> tuple[np.ndarray, int, bool]:
+    """Draw the start and goal, then place every step's shapes into ``kinds`` and ``params`` (and
+    the step each came from into ``steps``): the start and goal (as ``_start_goal`` gives them),
+    how many shapes were placed, and whether every shape of a step that is not optional was."""
     ends_drawn = _start_goal(rng, world, min_distance, END_MARGIN)
     ends = np.array([[ends_drawn[0], ends_drawn[1]], [ends_drawn[3], ends_drawn[4]]])
     clearance = 2.0 * robot_radius + 0.05
@@ -141,11 +145,13 @@ def _lay_out(rng, world: np.ndarray, min_distance: float, recipes: np.ndarray, c
                 kind = _propose(rng, recipes[step], sizes[step], spreads[step], world, ends, proposal)
                 if place(kind, proposal, low, high, ends, robot_radius + 0.3, clearance, kinds, params, outlines,
                          placed):
+                    steps[placed] = step
                     placed += 1
                     break
             else:
-                return ends_drawn, placed  # this shape found no free place: the layout fails here
-    return ends_drawn, placed
+                if not optional[step]:
+                    return ends_drawn, placed, False  # this shape found no free place: the layout fails here
+    return ends_drawn, placed, True
 
 
 class Layout(NamedTuple):
@@ -163,10 +169,9 @@ class Layout(NamedTuple):
 def _step_arrays(steps: tuple[Step, ...]) -> tuple[np.ndarray, ...]:
     """The steps as the kernel reads them (a curriculum asks for the same few lists again and again)."""
     arrays = (np.array([s.recipe for s in steps], dtype=np.int64), np.array([s.count for s in steps], dtype=np.int64),
-              np.array([s.tries for s in steps], dtype=np.int64),
+              np.array([s.tries for s in steps], dtype=np.int64), np.array([s.optional for s in steps], dtype=np.bool_),
               np.array([(*s.radius, *s.side) for s in steps], dtype=float).reshape(-1, 4),
-              np.array([s.spread for s in steps], dtype=float),
-              np.repeat(np.array([s.height for s in steps], dtype=float), [s.count for s in steps]))
+              np.array([s.spread for s in steps], dtype=float), np.array([s.height for s in steps], dtype=float))
     for array in arrays:
         array.flags.writeable = False  # shared by every call with these steps
     return arrays
@@ -176,7 +181,7 @@ def lay_out(rng: np.random.Generator, world: tuple[float, float, float, float], 
             steps: tuple[Step, ...], robot_radius: float) -> Layout | None:
     """A start and a goal at least ``min_distance`` apart (or 90% of the world's inner diagonal,
     if less) and every step's shapes placed around them, in the world (x0, y0, width, height);
-    None if a shape found no place.
+    None if a shape of a step that is not optional found no place.
 
     Start and goal are drawn ``END_MARGIN`` inside the world (in a world narrower than twice that,
     they may fall outside it: the caller checks). Shapes keep a robot's diameter (plus 5 cm) from each
@@ -184,12 +189,12 @@ def lay_out(rng: np.random.Generator, world: tuple[float, float, float, float], 
     """
     width, height = world[2], world[3]
     min_distance = min(min_distance, 0.9 * math.hypot(width - 2.0 * END_MARGIN, height - 2.0 * END_MARGIN))
-    recipes, counts, tries, sizes, spreads, heights = _step_arrays(steps)
+    recipes, counts, tries, optional, sizes, spreads, heights = _step_arrays(steps)
     total = int(counts.sum())
-    kinds, params = np.zeros(total, dtype=np.int64), np.zeros((total, 5))
-    ends, placed = _lay_out(rng, np.array(world, dtype=float), min_distance, recipes, counts, tries, sizes, spreads,
-                            robot_radius, kinds, params)
-    if placed < total:
+    kinds, params, owners = np.zeros(total, dtype=np.int64), np.zeros((total, 5)), np.zeros(total, dtype=np.int64)
+    ends, placed, complete = _lay_out(rng, np.array(world, dtype=float), min_distance, recipes, counts, tries, optional,
+                                      sizes, spreads, robot_radius, kinds, params, owners)
+    if not complete:
         return None
     sx, sy, yaw, gx, gy = ends.tolist()
-    return Layout((sx, sy, yaw), (gx, gy), kinds, params, heights)
+    return Layout((sx, sy, yaw), (gx, gy), kinds[:placed], params[:placed], heights[owners[:placed]])

@@ -13,7 +13,7 @@ from common.errors import ConfigError
 from common.generators import KINDS, SUITES, generate, get_suite
 from common.occupancy import OccupancyGrid, goal_reachable, path_exists, scenario_grid
 from common.scenario import (
-    BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, SegmentObstacle, load_scenario, save_scenario,
+    BoxObstacle, CircleObstacle, PolygonObstacle, RobotProfile, Scenario, SegmentObstacle, load_scenario, save_scenario,
 )
 
 
@@ -101,6 +101,28 @@ def test_train_and_eval_splits_differ_for_the_same_seed():
 def test_warehouse_has_31_obstacles():
     for seed in range(5):
         assert len(generate("warehouse", seed, 1.0).obstacles) == 31
+
+
+def test_a_wider_robot_gets_a_warehouse_with_fewer_crates_and_the_gaps_it_needs():
+    """Crates that find no place with a robot's gap are left out; shelves and pillars stay."""
+    template = Scenario(robot=RobotProfile(radius=0.35))
+    for seed in range(20):
+        scenario = generate("warehouse", seed, 1.0, template=template)
+        heights = [obstacle.height for obstacle in scenario.obstacles]
+        assert heights[:11] == [1.8] * 6 + [3.0] * 5 and set(heights[11:]) <= {0.6} and len(heights) < 31
+        assert _min_gap(scenario) >= 2 * 0.35 - 0.02
+
+
+def test_an_optional_step_leaves_out_what_finds_no_place_and_each_shape_keeps_its_height():
+    from common.layouts import BOX, CRATE, PILLAR, Step, lay_out
+
+    world = (0.0, 0.0, 6.0, 6.0)
+    crowded = (Step(CRATE, 40, tries=3, side=(0.5, 0.9), height=0.6, optional=True), Step(PILLAR, 3, height=3.0))
+    layout = lay_out(np.random.default_rng(1), world, 3.0, crowded, 0.2)
+    assert 3 < len(layout.kinds) < 43
+    np.testing.assert_array_equal(layout.heights, np.where(layout.kinds == BOX, 0.6, 3.0))
+    strict = (crowded[0]._replace(optional=False), crowded[1])
+    assert lay_out(np.random.default_rng(1), world, 3.0, strict, 0.2) is None
 
 
 def _dense_outline(obstacle) -> np.ndarray:
