@@ -1,41 +1,98 @@
-"""Whether a robot's neighbourhood is clear: the compiled test that spares most moves a pymunk query.
+"""Whether a move is clear: the compiled test that spares most moves a pymunk query.
 
-A move of a footprint of bounding radius R by at most d keeps every point of it within d + R of
-where its centre started, so with nothing nearer than that the move cannot touch anything. Most
-steps of a robot in the open are such moves.
+A footprint of bounding radius R whose centre moves from A to B stays, at every pose on the way,
+inside the capsule of radius R around the segment AB (plus the sagitta of an arc, for the exact
+integrator), so with no obstacle within that capsule the move cannot touch anything. Every move
+but the few that end in contact is such a move, and pymunk's Python layer, which the full
+sweep goes through, costs more than the rest of a step.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
-from common.geometry import box_distance, circle_distance, segment_distance
+from common.geometry import segment_distance
 
-_MARGIN = 1e-9  # m: a distance this close to the reach counts as within it (rounding)
+_MARGIN = 1e-9  # m: a distance this close to the radius counts as within it (rounding)
+
+
+@njit(cache=True, inline="always")
+def _cross(ox: float, oy: float, ax: float, ay: float, bx: float, by: float) -> float:
+    return (ax - ox) * (by - oy) - (ay - oy) * (bx - ox)
 
 
 @njit(cache=True)
-def nothing_within(x: float, y: float, reach: float, circles: np.ndarray, boxes: np.ndarray,
-                   segments: np.ndarray, solids: np.ndarray) -> bool:
-    """Whether no obstacle comes within ``reach`` of (x, y).
+def segments_gap(ax: float, ay: float, bx: float, by: float, cx: float, cy: float, dx: float, dy: float) -> float:
+    """Distance between the segments AB and CD (0 where they cross)."""
+    if (_cross(ax, ay, bx, by, cx, cy) * _cross(ax, ay, bx, by, dx, dy) < 0.0
+            and _cross(cx, cy, dx, dy, ax, ay) * _cross(cx, cy, dx, dy, bx, by) < 0.0):
+        return 0.0
+    # Apart (or touching, where an end lies on the other segment), the nearest pair has an end in it.
+    return min(segment_distance(ax, ay, cx, cy, dx, dy), segment_distance(bx, by, cx, cy, dx, dy),
+               segment_distance(cx, cy, ax, ay, bx, by), segment_distance(dx, dy, ax, ay, bx, by))
+
+
+@njit(cache=True)
+def segment_box_gap(ax: float, ay: float, bx: float, by: float, cx: float, cy: float, c: float, s: float,
+                    half_length: float, half_width: float) -> float:
+    """Distance between the segment AB and a box (centre, yaw cosine and sine, half sides); 0 where
+    the segment enters it."""
+    ux, uy = c * (ax - cx) + s * (ay - cy), -s * (ax - cx) + c * (ay - cy)
+    vx, vy = c * (bx - cx) + s * (by - cy), -s * (bx - cx) + c * (by - cy)
+    # Clip the segment's parameter range [0, 1] to the box's two slabs: anything left is inside.
+    low, high = 0.0, 1.0
+    for p, q, half in ((ux, vx - ux, half_length), (uy, vy - uy, half_width)):
+        if q == 0.0:
+            if abs(p) > half:
+                low, high = 1.0, 0.0
+        else:
+            t1, t2 = (-half - p) / q, (half - p) / q
+            low, high = max(low, min(t1, t2)), min(high, max(t1, t2))
+    if low <= high:
+        return 0.0
+    # Outside, the nearest pair is a segment end and the box, or a box corner and the segment.
+    gap = math.inf
+    for px, py in ((ux, uy), (vx, vy)):
+        gap = min(gap, math.hypot(max(abs(px) - half_length, 0.0), max(abs(py) - half_width, 0.0)))
+    for kx, ky in ((half_length, half_width), (-half_length, half_width), (-half_length, -half_width),
+                   (half_length, -half_width)):
+        gap = min(gap, segment_distance(kx, ky, ux, uy, vx, vy))
+    return gap
+
+
+@njit(cache=True)
+def path_clear(ax: float, ay: float, bx: float, by: float, radius: float, circles: np.ndarray, boxes: np.ndarray,
+               segments: np.ndarray, solids: np.ndarray) -> bool:
+    """Whether no obstacle comes within ``radius`` of the segment from (ax, ay) to (bx, by).
 
     ``circles``, ``boxes`` and ``segments`` are rows as :class:`flatland.lidar.Lidar` takes them;
     ``solids`` (rows x_min, y_min, x_max, y_max) bound what segments outline but do not fill (a
-    polygon's inside), so a point deep inside one is not taken for clear.
+    polygon's inside), so a path inside one is not taken for clear.
     """
-    limit = reach + _MARGIN
+    limit = radius + _MARGIN
+    # The path's box grown by the limit: a shape whose own box misses it is skipped unmeasured.
+    x0, x1, y0, y1 = min(ax, bx) - limit, max(ax, bx) + limit, min(ay, by) - limit, max(ay, by) + limit
     for i in range(circles.shape[0]):
-        if circle_distance(x, y, circles[i, 0], circles[i, 1], circles[i, 2]) < limit:
+        cx, cy, r = circles[i, 0], circles[i, 1], circles[i, 2]
+        if (cx + r > x0 and cx - r < x1 and cy + r > y0 and cy - r < y1
+                and segment_distance(cx, cy, ax, ay, bx, by) - r < limit):
             return False
     for i in range(boxes.shape[0]):
-        if box_distance(x, y, boxes[i, 0], boxes[i, 1], 2.0 * boxes[i, 4], 2.0 * boxes[i, 5], boxes[i, 2],
-                        boxes[i, 3]) < limit:
+        reach = boxes[i, 4] + boxes[i, 5]  # at least the half diagonal
+        if (boxes[i, 0] + reach > x0 and boxes[i, 0] - reach < x1 and boxes[i, 1] + reach > y0
+                and boxes[i, 1] - reach < y1
+                and segment_box_gap(ax, ay, bx, by, boxes[i, 0], boxes[i, 1], boxes[i, 2], boxes[i, 3], boxes[i, 4],
+                                    boxes[i, 5]) < limit):
             return False
     for i in range(segments.shape[0]):
-        if segment_distance(x, y, segments[i, 0], segments[i, 1], segments[i, 2], segments[i, 3]) < limit:
+        sx0, sy0, sx1, sy1 = segments[i, 0], segments[i, 1], segments[i, 2], segments[i, 3]
+        if (max(sx0, sx1) > x0 and min(sx0, sx1) < x1 and max(sy0, sy1) > y0 and min(sy0, sy1) < y1
+                and segments_gap(ax, ay, bx, by, sx0, sy0, sx1, sy1) < limit):
             return False
     for i in range(solids.shape[0]):
-        if solids[i, 0] - limit < x < solids[i, 2] + limit and solids[i, 1] - limit < y < solids[i, 3] + limit:
+        if solids[i, 2] > x0 and solids[i, 0] < x1 and solids[i, 3] > y0 and solids[i, 1] < y1:
             return False
     return True

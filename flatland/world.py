@@ -23,7 +23,7 @@ from common.polygons import convex_pieces
 from common.readings import Imu, Odometry, Readings, frozen
 from common.geometry import box_corner_points
 from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, SegmentObstacle, WorldSpec
-from flatland.clearance import nothing_within
+from flatland.clearance import path_clear
 from flatland.lidar import Lidar
 
 GRAVITY = 9.81
@@ -240,13 +240,16 @@ class World:
         where it first touched it: IR-SIM, which checks end poses only, would let it through.
         """
         end = self._integrate(start, v, w, self._dt)
-        # Nothing within the move's reach (path length |v|·dt plus the footprint): nothing touched.
-        # (Space.segment_query with a radius is no substitute: chipmunk walks its tree with the bare
-        # segment and misses shapes that only the radius reaches.)
-        reach = abs(v) * self._dt + self._sweep_radius
+        # The footprint stays within its bounding radius of the chord from start to end, plus the
+        # sagitta of an arc (R (1 - cos(θ/2)) <= |v| |w| dt² / 8): nothing there, nothing touched.
+        capsule = self._sweep_radius + 0.125 * abs(v * w) * self._dt * self._dt
         lidar = self.lidar
-        if nothing_within(start[0], start[1], reach, lidar.circles, lidar.boxes, lidar.segments, self._solids):
+        if path_clear(start[0], start[1], end[0], end[1], capsule, lidar.circles, lidar.boxes, lidar.segments,
+                      self._solids):
             return end, False  # decided without pymunk's Python layer, which costs more than the rest of a move
+        # (Space.segment_query with a radius is no substitute for what follows: chipmunk walks its
+        # tree with the bare segment and misses shapes that only the radius reaches.)
+        reach = abs(v) * self._dt + self._sweep_radius
         box = pymunk.BB(start[0] - reach, start[1] - reach, start[0] + reach, start[1] + reach)
         candidates = self.space.bb_query(box, self._not_robot)
         if not candidates:

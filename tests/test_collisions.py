@@ -95,12 +95,12 @@ def test_a_robot_deep_inside_a_polygon_collides_at_its_first_move():
 
 
 @pytest.mark.parametrize("seed", range(3))
-def test_the_clear_neighbourhood_test_agrees_with_signed_distances(seed):
-    """nothing_within is True exactly when every obstacle (and a polygon's inside) lies at least
-    ``reach`` away, up to its rounding margin; moves it clears skip pymunk, so a wrong True would
-    let a robot through an obstacle."""
+def test_the_clear_path_test_agrees_with_signed_distances(seed):
+    """path_clear is True only when every obstacle (and a polygon's inside) lies at least
+    ``radius`` from the segment, and False only when one is within it or a polygon's bounding box
+    is near: moves it clears skip pymunk, so a wrong True would let a robot through an obstacle."""
     from common.geometry import box_sdf, circle_sdf, polygon_sdf, segments_distance
-    from flatland.clearance import nothing_within
+    from flatland.clearance import path_clear
 
     rng = np.random.default_rng(seed)
     triangle = PolygonObstacle(vertices=[(6.0, 6.0), (9.0, 6.5), (7.0, 9.0)])
@@ -108,25 +108,55 @@ def test_the_clear_neighbourhood_test_agrees_with_signed_distances(seed):
     circles = [CircleObstacle(x=x, y=y, radius=r) for x, y, r in rng.uniform([0, 0, 0.1], [10, 10, 0.8], (4, 3))]
     boxes = [BoxObstacle(x=x, y=y, length=a, width=b, yaw=t) for x, y, a, b, t in rng.uniform([0, 0, 0.2, 0.2, -3], [10, 10, 2, 1, 3], (4, 5))]
     world = make_world([*circles, *boxes, triangle, line], walls=True, size=10.0)
-    points = rng.uniform(-0.5, 10.5, (3000, 2))
-    distance = np.min([
-        *(circle_sdf(points, c.x, c.y, c.radius) for c in circles),
-        *(box_sdf(points, b.x, b.y, b.length, b.width, b.yaw) for b in boxes),
-        polygon_sdf(points, np.array(triangle.vertices)),
-        segments_distance(points, np.array(line.points[:-1]), np.array(line.points[1:])),
-        segments_distance(points, world.lidar.segments[:4, :2], world.lidar.segments[:4, 2:]),
-    ], axis=0)
     lidar = world.lidar
-    for (x, y), nearest in zip(points, distance):
-        reach = rng.uniform(0.05, 1.0)
-        clear = nothing_within(x, y, reach, lidar.circles, lidar.boxes, lidar.segments, world._solids)
+
+    def nearest(points):
+        return np.min([
+            *(circle_sdf(points, c.x, c.y, c.radius) for c in circles),
+            *(box_sdf(points, b.x, b.y, b.length, b.width, b.yaw) for b in boxes),
+            polygon_sdf(points, np.array(triangle.vertices)),
+            segments_distance(points, np.array(line.points[:-1]), np.array(line.points[1:])),
+            segments_distance(points, lidar.segments[:4, :2], lidar.segments[:4, 2:]),
+        ])
+
+    step = 0.002
+    for _ in range(1500):
+        a = rng.uniform(-0.5, 10.5, 2)
+        b = a + rng.uniform(-0.6, 0.6, 2) * (rng.random() < 0.8)  # a fifth of them: a point, not a segment
+        radius = rng.uniform(0.05, 0.6)
+        samples = a + np.linspace(0, 1, int(np.hypot(*(b - a)) / step) + 2)[:, None] * (b - a)
+        sampled = nearest(samples)  # at most half a sample step above the segment's true distance
+        clear = path_clear(a[0], a[1], b[0], b[1], radius, lidar.circles, lidar.boxes, lidar.segments, world._solids)
         if clear:
-            assert nearest >= reach - 1e-9
-        elif nearest > reach + 1e-6:
-            # Only a polygon's bounding box may refuse a point that is in fact clear.
-            x0, y0 = np.min(triangle.vertices, axis=0) - reach
-            x1, y1 = np.max(triangle.vertices, axis=0) + reach
-            assert x0 < x < x1 and y0 < y < y1
+            assert sampled >= radius - 1e-9
+        elif sampled > radius + step:
+            # Only a polygon's bounding box may refuse a path that is in fact clear.
+            x0, y0 = np.min(triangle.vertices, axis=0) - radius
+            x1, y1 = np.max(triangle.vertices, axis=0) + radius
+            assert max(x0, min(a[0], b[0])) <= min(x1, max(a[0], b[0])) and max(y0, min(a[1], b[1])) <= min(y1, max(a[1], b[1]))
+
+
+def test_segment_gaps_to_boxes_and_segments_match_sampled_distances():
+    """The two exact gaps path_clear is built on, against the distance of many points along the
+    segment: crossing, grazing, parallel and apart, with long segments through small boxes."""
+    from common.geometry import box_sdf, segments_distance
+    from flatland.clearance import segment_box_gap, segments_gap
+
+    rng = np.random.default_rng(0)
+    for _ in range(2000):
+        a, b = rng.uniform(-3, 3, 2), rng.uniform(-3, 3, 2)
+        samples = a + np.linspace(0, 1, 4001)[:, None] * (b - a)
+        slack = np.hypot(*(b - a)) / 4000
+        x, y, length, width, yaw = rng.uniform([-1, -1, 0.1, 0.1, -3], [1, 1, 2, 2, 3])
+        gap = segment_box_gap(*a, *b, x, y, math.cos(yaw), math.sin(yaw), length / 2, width / 2)
+        sampled = max(box_sdf(samples, x, y, length, width, yaw).min(), 0.0)
+        assert sampled - slack - 1e-9 <= gap <= sampled + 1e-9
+        c, d = rng.uniform(-3, 3, 2), rng.uniform(-3, 3, 2)
+        sampled = segments_distance(samples, c[None], d[None]).min()
+        assert sampled - slack - 1e-9 <= segments_gap(*a, *b, *c, *d) <= sampled + 1e-9
+    # A segment straight through a thin box, both ends well outside it, touches it.
+    assert segment_box_gap(-1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.05, 3.0) == 0.0
+    assert segments_gap(-1.0, 0.0, 1.0, 0.0, 0.0, -1.0, 0.0, 1.0) == 0.0
 
 
 def test_starting_in_contact_is_judged_after_the_first_move_as_in_irsim():
