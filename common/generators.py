@@ -130,6 +130,8 @@ def generate(kind: str, seed: int, difficulty: float = 0.5, split: Split = "trai
 
     ``template`` supplies the robot, lidar, world size and goal threshold (defaults: a 10 m × 10 m
     walled world, a 0.2 m circular robot with v_max 1 m/s, w_max 1 rad/s, a 36-beam 5 m lidar).
+    A template whose robot finds no layout (too wide for the world) is a :class:`ConfigError`
+    naming ``robot``.
     """
     if kind not in _GENERATORS:
         raise ConfigError(None, "kind", f"unknown scenario kind {quote(kind)}; allowed: {', '.join(KINDS)}")
@@ -146,7 +148,10 @@ def generate(kind: str, seed: int, difficulty: float = 0.5, split: Split = "trai
             name=f"{kind}-{split}-{seed}", kind=kind, difficulty=difficulty, seed=seed,
             start=tuple(float(v) for v in start), goal=(float(goal[0]), float(goal[1])), obstacles=obstacles))
         return scenario
-    raise RuntimeError(f"no reachable {kind} layout in {_MAX_ATTEMPTS} attempts (seed {seed})")
+    world = template.world
+    raise ConfigError(None, "robot", f"no reachable {kind} layout in {_MAX_ATTEMPTS} attempts (seed {seed}) for a robot "
+                      f"of bounding radius {template.robot.bounding_radius:g} m in a {world.width:g} m x "
+                      f"{world.height:g} m world; allowed: a smaller robot or a larger world")
 
 
 def _valid(scenario: Scenario) -> bool:

@@ -52,6 +52,8 @@ def _with(change: dict, stage: dict | None = None) -> dict:
     (_with({}, {"hyperparams": {"learning_rate": "cos_1e-3"}}), "stages.0.hyperparams.learning_rate", "'lin_<number>'"),
     (_with({}, {"algorithm": "td3", "hyperparams": {"action_noise": {"type": "pink"}}}),
      "stages.0.hyperparams.action_noise", "allowed: {type: normal | ornstein_uhlenbeck"),
+    (_with({}, {"scenarios": {"kind": "sparse"}, "env_kwargs": {"robot": {"radius": 1.5}}}), "stages.0.env_kwargs.robot",
+     "no reachable sparse layout in 200 attempts (seed 0) for a robot of bounding radius 1.5 m"),
 ])
 def test_schema_errors_name_the_field_and_what_is_allowed(data, field, message):
     with pytest.raises(ConfigError) as error:

@@ -46,7 +46,7 @@ def test_a_world_too_small_for_the_start_and_goal_is_refused(kind):
     # Placed kinds draw start and goal 1 m inside the world, a trap 3 m from its centre: a 0.9 m
     # world has no such place, and every kind checks its own layouts (none may come out invalid).
     tiny = Scenario(world={"width": 0.9, "height": 0.9, "walls": False}, start=(0.45, 0.45, 0.0), goal=(0.5, 0.5))
-    with pytest.raises(RuntimeError, match=f"no reachable {kind} layout"):
+    with pytest.raises(ConfigError, match=f"robot: no reachable {kind} layout .* allowed: a smaller robot or a larger world"):
         generate(kind, 0, template=tiny)
 
 

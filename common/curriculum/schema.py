@@ -39,10 +39,10 @@ from common.curriculum.hyperparams import resolve_hyperparams
 from common.curriculum.policy import algorithm_class
 from common.curriculum.policy_file import ALGORITHMS
 from common.errors import ConfigError, quote
-from common.generators import KINDS, SUITES
+from common.generators import KINDS, SUITES, generate
 from common.observations import LAYOUTS
 from common.rewards import resolve_reward_spec
-from common.scenario import pydantic_error
+from common.scenario import RobotProfile, Scenario, pydantic_error
 from common.tiers import TIERS
 from common.yaml_io import read_yaml_mapping
 
@@ -153,7 +153,9 @@ def _check_env_kwargs(stage: StageSpec, source: str | Path, field: str) -> None:
         if key not in allowed:
             raise ConfigError(source, f"{field}.{key}", f"not a {stage.world} env argument; allowed: {', '.join(allowed)}")
     try:
-        conditions_of(stage.env_kwargs, source, field).for_tier(stage.world)
+        conditions = conditions_of(stage.env_kwargs, source, field).for_tier(stage.world)
+        if conditions.profile is not None:
+            _check_robot_fits(stage, conditions.profile)
         if "goal_threshold" in stage.env_kwargs:
             from common.nav_env import threshold_range
 
@@ -162,6 +164,19 @@ def _check_env_kwargs(stage: StageSpec, source: str | Path, field: str) -> None:
         raise ConfigError(source, error.field if error.source else f"{field}.{error.field}", error.problem) from None
     if "resample" in stage.env_kwargs and not isinstance(stage.env_kwargs["resample"], bool):
         raise ConfigError(source, f"{field}.resample", f"got {quote(stage.env_kwargs['resample'])}; allowed: true or false")
+
+
+def _check_robot_fits(stage: StageSpec, robot: RobotProfile) -> None:
+    """A robot too wide for the stage's generator kinds finds no layout: say so before training
+    (the first scenario of each kind is drawn as the env would draw it)."""
+    spec = stage.scenarios
+    if stage.world == "physics3d":
+        from physics3d.robot import TEMPLATE as template
+    else:
+        template = Scenario()
+    template = template.model_copy(update={"robot": robot})
+    for kind in [spec.kind] if spec.kind else list(spec.mix or ()):
+        generate(kind, 0, spec.difficulty, "train", template)
 
 
 def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
