@@ -185,9 +185,14 @@ def _is_number(value: Any) -> bool:
 
 def _number(value: Any, path: str, low: float | None = None, strict: bool = False, allow_inf: bool = False) -> float:
     """A real number, finite unless ``allow_inf``, optionally bounded below (``strict``: exclusive)."""
-    if not _is_number(value) or math.isnan(value):
+    if not _is_number(value):
         raise _fail(path, f"expected a number (got {quote(value)})")
-    value = float(value)
+    try:
+        value = float(value)
+    except OverflowError:  # an integer beyond any float
+        raise _fail(path, "expected a finite number (got an integer too large for a float)") from None
+    if math.isnan(value):
+        raise _fail(path, f"expected a number (got {quote(value)})")
     if math.isinf(value) and not allow_inf:
         raise _fail(path, f"expected a finite number (got {quote(value)})")
     if low is not None and (value <= low if strict else value < low):
@@ -225,10 +230,14 @@ def _vector(value: Any, path: str, size: int | None = None, min_size: int = 0, a
     if not isinstance(value, (list, tuple)) or (size is not None and len(value) != size) or len(value) < min_size:
         wanted = f"{size} numbers" if size is not None else f"at least {min_size} numbers" if min_size else "numbers"
         raise _fail(path, f"expected a list of {wanted} (got {quote(value)})")
-    if _PLAIN_NUMBERS.issuperset(map(type, value)) and math.isfinite(sum(value)):
-        # The common case, without naming each entry's path (a finite sum: no NaN or inf, and an
-        # overflowing one just takes the checked path).
-        return [float(v) for v in value]
+    if _PLAIN_NUMBERS.issuperset(map(type, value)):
+        try:
+            # The common case, without naming each entry's path: a finite float sum has no NaN, no
+            # inf and no integer beyond a float (an overflowing one takes the checked path).
+            if math.isfinite(sum(map(float, value))):
+                return [float(v) for v in value]
+        except OverflowError:
+            pass
     return [_number(v, f"{path}[{i}]", allow_inf=allow_inf) for i, v in enumerate(value)]
 
 
@@ -481,7 +490,8 @@ def _goal(entry: Entry) -> tuple[float, float]:
 def _shape(item: _Value, draws: _Draws, allowed: tuple[str, ...]) -> _Shape:
     """An IR-SIM ``shape`` mapping as a body-frame outline; draws random shapes from the file's generator.
 
-    A group's objects share one shape mapping: a fixed shape is read once per file parse.
+    A group's objects share one shape mapping: a fixed shape is read once per :class:`ReadCache`
+    (once per file, across its seeds, in a :class:`~common.world_file.WorldFile`).
     """
     if isinstance(item.value, dict) and item.value.get("random_shape"):
         return _read_shape(item, draws, allowed)
@@ -726,7 +736,7 @@ def _static_obstacle(entry: Entry, path: str, draws: _Draws, allowed: tuple[str,
 
 
 _DIFF_DRIVE_KEYS = ("kinematics", "static", "velocity")
-_PROFILE_KEYS = ("vel_min", "vel_max", "acce", "shape")
+_PROFILE_KEYS = ("vel_min", "vel_max", "acce")  # and the footprint read, which is keyed on its shape
 
 
 def _parse(data: dict, source: str | Path | None, seed: int | None, reads: ReadCache) -> Scenario:

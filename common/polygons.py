@@ -22,7 +22,7 @@ def is_convex(vertices: np.ndarray) -> bool:
 
 
 @njit(cache=True)
-def _orientation(ax: float, ay: float, bx: float, by: float, cx: float, cy: float) -> float:
+def orientation(ax: float, ay: float, bx: float, by: float, cx: float, cy: float) -> float:
     """Twice the signed area of the triangle (a, b, c)."""
     return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
 
@@ -43,10 +43,10 @@ def _edges_meet(v: np.ndarray) -> bool:
             if i == 0 and j == n - 1:
                 continue  # the last edge is adjacent to the first
             q1x, q1y, q2x, q2y = v[j, 0], v[j, 1], v[(j + 1) % n, 0], v[(j + 1) % n, 1]
-            d1 = _orientation(q1x, q1y, q2x, q2y, p1x, p1y)
-            d2 = _orientation(q1x, q1y, q2x, q2y, p2x, p2y)
-            d3 = _orientation(p1x, p1y, p2x, p2y, q1x, q1y)
-            d4 = _orientation(p1x, p1y, p2x, p2y, q2x, q2y)
+            d1 = orientation(q1x, q1y, q2x, q2y, p1x, p1y)
+            d2 = orientation(q1x, q1y, q2x, q2y, p2x, p2y)
+            d3 = orientation(p1x, p1y, p2x, p2y, q1x, q1y)
+            d4 = orientation(p1x, p1y, p2x, p2y, q2x, q2y)
             if (d1 > 0) != (d2 > 0) and (d3 > 0) != (d4 > 0) and d1 != 0 and d2 != 0 and d3 != 0 and d4 != 0:
                 return True
             if ((d1 == 0 and _on_segment(q1x, q1y, q2x, q2y, p1x, p1y))

@@ -247,8 +247,10 @@ class World:
         if path_clear(start[0], start[1], end[0], end[1], capsule, lidar.circles, lidar.boxes, lidar.segments,
                       self._solids):
             return end, False  # decided without pymunk's Python layer, which costs more than the rest of a move
-        # (Space.segment_query with a radius is no substitute for what follows: chipmunk walks its
-        # tree with the bare segment and misses shapes that only the radius reaches.)
+        # Something is near the path. (Space.segment_query with a radius is no substitute for what
+        # follows: chipmunk walks its tree with the bare segment and misses shapes that only the
+        # radius reaches; the bounding-box query rarely comes back empty now, for a path near a
+        # polygon's bounds or within the margin.)
         reach = abs(v) * self._dt + self._sweep_radius
         box = pymunk.BB(start[0] - reach, start[1] - reach, start[0] + reach, start[1] + reach)
         candidates = self.space.bb_query(box, self._not_robot)

@@ -57,6 +57,7 @@ HOSTILE = {
     "one polygon shared by many": (ROBOT + "obstacle:\n  - number: 1000\n    distribution: {name: random, min_distance: 0}\n"
                                    "    shape: {name: polygon, vertices: [" + ", ".join(f"[{math.cos(k / 4):.3f}, {math.sin(k / 4):.3f}]" for k in range(25)) + "]}\n",
                                    "polygon vertices in all"),
+    "an integer beyond any float": (ROBOT + "  vel_max: [" + "9" * 400 + ", 1]\n", "robot.vel_max[0]: expected a finite number"),
     "crossed polygon": ("obstacles:\n  - {type: polygon, vertices: [[0, 0], [2, 2], [2, 0], [0, 2]]}\n", "crosses itself"),
 }
 

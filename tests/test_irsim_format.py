@@ -252,33 +252,23 @@ obstacle:
 
 
 def test_spacing_decisions_match_irsims_rule():
-    """The compiled sampler keeps a candidate exactly when IR-SIM's random_uniform would: the
+    """The compiled sampler keeps a candidate exactly when IR-SIM's random_uniform does: the
     np.linalg.norm of its xy difference to every placed point is at least min_distance, decided
     bit for bit even within rounding of min_distance (where hypot, say, decides differently)."""
+    irsim_random = optional("irsim.util.random")
     low, high = np.array([0.0, 0.0, 0.0]), np.array([1.0, 1.0, 0.0])
-
-    def irsims(rng, number, spacing):
-        sets = []
-        for _ in range(2):  # states, then goals
-            points = np.zeros((3, number))
-            for i in range(number):
-                for _attempt in range(1000):
-                    candidate = rng.uniform(low, high)
-                    if i == 0 or np.min(np.linalg.norm(points[:2, :i] - candidate[:2, None], axis=0)) >= spacing:
-                        break
-                points[:, i] = candidate
-            sets.append(points.T.tolist())
-        return sets
-
     for seed, number, spacing in ((0, 12, 0.25), (1, 30, 0.12), (2, 8, 0.0), (3, 6, 2.0)):
+        irsim_random.set_seed(seed)
+        theirs = [irsim_random.random_uniform(low, high, (3, number), spacing).T.tolist() for _ in ("states", "goals")]
         ours, _ = _spaced_points(np.random.default_rng(seed), low, high, number, spacing, 10**9)
-        assert ours.tolist() == irsims(np.random.default_rng(seed), number, spacing)
+        assert ours.tolist() == theirs
     rng = np.random.default_rng(0)
     for spacing in (0.25, 1.0, 1.2, 0.6, 3.7):
         angles = rng.uniform(0, 2 * np.pi, 2000)
         for dx, dy in zip(spacing * np.cos(angles), spacing * np.sin(angles)):
             for x in (np.nextafter(dx, -np.inf), dx, np.nextafter(dx, np.inf)):
-                assert _too_close(x, dy, spacing) == (np.linalg.norm([x, dy]) < spacing)
+                # As IR-SIM computes it: np.linalg.norm(diffs, axis=0) of a (2, n) array.
+                assert _too_close(x, dy, spacing) == (np.linalg.norm(np.array([[x], [dy]]), axis=0)[0] < spacing)
 
 
 def test_a_world_files_seeds_share_the_reads_of_its_fixed_parts(tmp_path):
@@ -292,15 +282,28 @@ def test_a_world_files_seeds_share_the_reads_of_its_fixed_parts(tmp_path):
     assert one == parse_irsim(read_yaml_mapping(path), source=path, seed=1)  # as a parse without the cache
 
 
-def test_read_cache_rereads_what_changed_and_stays_bounded(tmp_path, monkeypatch):
-    text = ROBOT + "  shape: {name: circle, random_shape: true, radius_range: [0.1, 0.5]}\n  vel_max: [1, 1]\n"
-    data, reads = yaml.safe_load(text), ReadCache()
+@pytest.mark.parametrize("key, value, read", [
+    ("vel_max", [2, 1], lambda s: s.robot.v_max), ("vel_min", [0.5, -1], lambda s: s.robot.v_min),
+    ("acce", [3, 4], lambda s: s.robot.accel_v), ("shape", {"name": "circle", "radius": 0.3}, lambda s: s.robot.radius),
+    ("sensors", [{"name": "lidar2d", "number": 12}], lambda s: s.lidar.beams),
+])
+def test_the_read_cache_rereads_a_value_that_changed(key, value, read):
+    """A new value object for any field a cached read depends on is read afresh (the rest of the
+    file's objects unchanged, so only that field's key can tell the two apart)."""
+    data = yaml.safe_load(ROBOT + "  shape: {name: circle, radius: 0.2}\n  vel_max: [1, 1]\n")
+    reads = ReadCache()
+    before = read(parse_irsim(data, seed=1, reads=reads))
+    changed = {**data, "robot": {**data["robot"], key: value}}
+    after = parse_irsim(changed, seed=1, reads=reads)
+    assert read(after) != before and after == parse_irsim(changed, seed=1)
+    assert read(parse_irsim(data, seed=1, reads=reads)) == before
+
+
+def test_the_read_cache_follows_drawn_shapes_and_stays_bounded(monkeypatch):
+    data = yaml.safe_load(ROBOT + "  shape: {name: circle, random_shape: true, radius_range: [0.1, 0.5]}\n")
+    reads = ReadCache()
     radii = {parse_irsim(data, seed=seed, reads=reads).robot.radius for seed in range(5)}
     assert len(radii) == 5  # a drawn footprint is a new robot every seed, cache or not
-    faster = copy.deepcopy(data)
-    faster["robot"]["vel_max"] = [2, 1]
-    assert parse_irsim(faster, seed=1, reads=reads).robot.v_max == 2.0
-    assert parse_irsim(data, seed=1, reads=reads).robot.v_max == 1.0
     monkeypatch.setattr(ReadCache, "MAX_ENTRIES", 6)
     reads = ReadCache()
     for seed in range(40):
