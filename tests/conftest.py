@@ -1,5 +1,6 @@
 """Test-wide settings: headless plotting, and the comparison tables printed into the log."""
 
+import importlib
 import os
 import tempfile
 from pathlib import Path
@@ -36,7 +37,7 @@ def optional(module: str):
     """Import an optional test dependency: skip without it, except in CI (CI=true), where a
     missing one fails, so a green CI never hides a test that did not run."""
     if IN_CI:
-        return __import__(module)
+        return importlib.import_module(module)  # the module itself, also for a dotted name
     return pytest.importorskip(module)
 
 
