@@ -20,6 +20,7 @@ from common.conditions import Conditions, HeadingSource
 from common.errors import ConfigError, quote
 from common.scenario import MAX_LENGTH, Scenario
 from common.sources import ScenarioSource, scenario_source
+from common.tiers import generator_template
 
 
 class WorldLike(Protocol):
@@ -71,9 +72,10 @@ class NavigationEnv(gym.Env):
                      motor_scale=motor_scale, friction=friction, mass_scale=mass_scale, control_period=control_period,
                      dynamics=dynamics, heading_source=heading_source, gyro_noise=gyro_noise, gyro_bias=gyro_bias)
         self.conditions = Conditions.parse({k: v for k, v in given.items() if v is not None}).for_tier(self.tier)
+        template = template or generator_template(self.tier)
         if self.conditions.profile is not None:
             # Generated scenarios leave gaps sized for the robot that will drive them.
-            template = (template or Scenario()).model_copy(update={"robot": self.conditions.profile})
+            template = template.model_copy(update={"robot": self.conditions.profile})
         self.source = scenario_source(world, difficulty, template, resample)
         self.goal_threshold = threshold_range(goal_threshold)
         self.observation_name = observation

@@ -80,12 +80,6 @@ def _goal_terms(readings: Readings, goal: tuple[float, float], out: np.ndarray, 
     return distance / scale
 
 
-def _clip(out: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
-    # The ufuncs directly: np.clip's Python wrapper costs more than the clipping on 7-43 values.
-    np.minimum(out, high, out=out)
-    return np.maximum(out, low, out=out)
-
-
 def sector_bounds(beams: int, sectors: int) -> np.ndarray:
     """Rows [first, end) of the beams each of ``sectors`` sectors reads: consecutive beams when
     there are more beams than sectors, else the beam under each sector (repeated)."""
@@ -124,14 +118,15 @@ def make_layout(
     if name == "nav7":
         low = np.array([-1, -1, -1, -1, -1, 0, 0], dtype=np.float32)
         high = np.ones(7, dtype=np.float32)
+        whole_scan = sector_bounds(lidar.beams, 1)  # one sector: the nearest return of all
 
         def compute(readings: Readings, goal: tuple[float, float]) -> np.ndarray:
             out = np.empty(7, dtype=np.float32)
             out[6] = _goal_terms(readings, goal, out, goal_distance_scale)
             out[3] = readings.odometry.v * inv_v
             out[4] = readings.odometry.w * inv_w
-            out[5] = readings.lidar.min() * inv_r
-            return _clip(out, low, high)
+            _encode_sectors(out, 5, readings.lidar, whole_scan, inv_r, 1.0, 0.0, low, high)
+            return out
 
     elif name in ("lidar43", "lidar43_log"):
         low = np.concatenate([[-1, -1, -1, -1, -1, -1], np.zeros(LIDAR43_BEAMS + 1)]).astype(np.float32)

@@ -3,25 +3,41 @@
 from __future__ import annotations
 
 import importlib
+from typing import TYPE_CHECKING, Any
 
 from common.conditions import Conditions
 from common.errors import ConfigError, quote
-from common.nav_env import WorldLike
 from common.scenario import Scenario
 
+if TYPE_CHECKING:
+    from common.nav_env import WorldLike
+
 _WORLDS = {"flatland": "flatland.world:World", "physics3d": "physics3d.world:World"}
+# What each tier's generator kinds draw scenarios around (flatland: the defaults of Scenario).
+_TEMPLATES = {"flatland": "common.scenario:Scenario", "physics3d": "physics3d.robot:TEMPLATE"}
 TIERS = tuple(_WORLDS)
+
+
+def _load(tier: str, table: dict[str, str]) -> Any:
+    """The object a tier's entry in ``table`` names ("module:attribute"), imported now."""
+    if tier not in table:
+        raise ConfigError(None, "world", f"unknown tier {quote(tier)}; allowed: {', '.join(TIERS)}")
+    module_name, name = table[tier].split(":")
+    try:
+        return getattr(importlib.import_module(module_name), name)
+    except (ImportError, AttributeError):
+        raise ConfigError(None, "world", f"the {tier} tier is not available in this version") from None
 
 
 def make_world(tier: str, scenario: Scenario, seed: int | None = None, conditions: Conditions | None = None) -> WorldLike:
     """A world of the named tier built from ``scenario`` under ``conditions`` (the tier's defaults
     where unset; :mod:`common.conditions`). ``world.scenario`` is the scenario as conditioned."""
-    if tier not in _WORLDS:
-        raise ConfigError(None, "world", f"unknown tier {quote(tier)}; allowed: {', '.join(TIERS)}")
-    module_name, class_name = _WORLDS[tier].split(":")
-    try:
-        world_class = getattr(importlib.import_module(module_name), class_name)
-    except (ImportError, AttributeError):
-        raise ConfigError(None, "world", f"the {tier} tier is not available in this version") from None
+    world_class = _load(tier, _WORLDS)
     resolved = (conditions or Conditions()).for_tier(tier)
     return world_class(resolved.scenario(scenario), seed=seed, **resolved.world_kwargs(tier))
+
+
+def generator_template(tier: str) -> Scenario:
+    """The robot, lidar and world a tier's generator kinds draw scenarios around."""
+    template = _load(tier, _TEMPLATES)
+    return template() if isinstance(template, type) else template

@@ -9,13 +9,13 @@ layer, which the full sweep goes through, costs more than the rest of a step.
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 from numba import njit
 
-from common.geometry import segment_distance
+from common.geometry import box_distance, segment_distance
 from common.polygons import orientation
+from flatland.lidar import slab
 
 _MARGIN = 1e-9  # m: a distance this close to the radius counts as within it (rounding)
 
@@ -38,21 +38,14 @@ def segment_box_gap(ax: float, ay: float, bx: float, by: float, cx: float, cy: f
     the segment enters it."""
     ux, uy = c * (ax - cx) + s * (ay - cy), -s * (ax - cx) + c * (ay - cy)
     vx, vy = c * (bx - cx) + s * (by - cy), -s * (bx - cx) + c * (by - cy)
-    # Clip the segment's parameter range [0, 1] to the box's two slabs: anything left is inside.
-    low, high = 0.0, 1.0
-    for p, q, half in ((ux, vx - ux, half_length), (uy, vy - uy, half_width)):
-        if q == 0.0:
-            if abs(p) > half:
-                low, high = 1.0, 0.0
-        else:
-            t1, t2 = (-half - p) / q, (half - p) / q
-            low, high = max(low, min(t1, t2)), min(high, max(t1, t2))
+    # The segment's parameter range [0, 1] narrowed to the box's two slabs: anything left is inside.
+    low, high = slab(ux, vx - ux, half_length, 0.0, 1.0)
+    low, high = slab(uy, vy - uy, half_width, low, high)
     if low <= high:
         return 0.0
     # Outside, the nearest pair is a segment end and the box, or a box corner and the segment.
-    gap = math.inf
-    for px, py in ((ux, uy), (vx, vy)):
-        gap = min(gap, math.hypot(max(abs(px) - half_length, 0.0), max(abs(py) - half_width, 0.0)))
+    length, width = 2.0 * half_length, 2.0 * half_width
+    gap = min(box_distance(ax, ay, cx, cy, length, width, c, s), box_distance(bx, by, cx, cy, length, width, c, s))
     for kx, ky in ((half_length, half_width), (-half_length, half_width), (-half_length, -half_width),
                    (half_length, -half_width)):
         gap = min(gap, segment_distance(kx, ky, ux, uy, vx, vy))

@@ -32,7 +32,7 @@ def _hit_circle(ox, oy, dx, dy, cx, cy, r):
 
 
 @njit(cache=True, inline="always")
-def _slab(p, q, half, t_near, t_far):
+def slab(p, q, half, t_near, t_far):
     """Narrow [t_near, t_far] to where p + t q lies within [-half, half] (empty: t_near > t_far)."""
     if q == 0.0:
         return (t_near, t_far) if abs(p) <= half else (math.inf, -math.inf)
@@ -44,8 +44,8 @@ def _slab(p, q, half, t_near, t_far):
 def _hit_box(ox, oy, dx, dy, cx, cy, cos_yaw, sin_yaw, half_length, half_width):
     # Slab test in the box's frame: one test per box instead of four edge tests.
     rx, ry = ox - cx, oy - cy
-    t_near, t_far = _slab(cos_yaw * rx + sin_yaw * ry, cos_yaw * dx + sin_yaw * dy, half_length, -math.inf, math.inf)
-    t_near, t_far = _slab(-sin_yaw * rx + cos_yaw * ry, -sin_yaw * dx + cos_yaw * dy, half_width, t_near, t_far)
+    t_near, t_far = slab(cos_yaw * rx + sin_yaw * ry, cos_yaw * dx + sin_yaw * dy, half_length, -math.inf, math.inf)
+    t_near, t_far = slab(-sin_yaw * rx + cos_yaw * ry, -sin_yaw * dx + cos_yaw * dy, half_width, t_near, t_far)
     if t_far < t_near:
         return math.inf
     return t_near if t_near > _EPS else t_far

@@ -12,7 +12,6 @@ from common.observations import ObservationLayout
 from common.readings import Readings
 from common.scenario import Scenario
 from physics3d.render import ChaseCamera, GuiOverlay
-from physics3d.robot import TEMPLATE
 from physics3d.world import World
 
 
@@ -108,7 +107,7 @@ class WarehouseNavEnv(NavigationEnv):
         self._chase: ChaseCamera | None = None
         self._overlay: GuiOverlay | None = None
         self.world: World | None = None
-        super().__init__(world=world, observation=observation, reward=reward, template=template or TEMPLATE, **kwargs)
+        super().__init__(world=world, observation=observation, reward=reward, template=template, **kwargs)
 
     def _build_world(self, scenario: Scenario) -> World:
         # One physics client for the env's life: a new scenario is rebuilt in it (and a GUI stays open).

@@ -15,7 +15,7 @@ from common.conditions import Conditions
 from common.errors import ConfigError
 from common.robots import PROFILES
 from common.scenario import LidarSpec, Scenario, SegmentObstacle, WorldSpec
-from common.tiers import make_world
+from common.tiers import generator_template, make_world
 
 OPEN = Scenario(start=(2.0, 5.0, 0.0), goal=(9.0, 5.0), world=WorldSpec(width=12.0, height=10.0))
 
@@ -144,3 +144,12 @@ def test_the_heading_and_gyro_knobs_reach_the_3d_world():
     world = env.unwrapped.world
     assert not world.gyro_heading and world.imu.gyro_noise == 0.02 and world.imu.gyro_bias == 0.01
     env.close()
+
+
+def test_each_tier_generates_around_its_own_template_and_an_unknown_tier_is_refused():
+    from physics3d.robot import TEMPLATE
+
+    assert generator_template("physics3d") is TEMPLATE and generator_template("flatland") == Scenario()
+    assert gym.make("physics3d/WarehouseNav-v0").unwrapped.source.template.name == TEMPLATE.name
+    with pytest.raises(ConfigError, match="unknown tier 'mars'; allowed: flatland, physics3d"):
+        generator_template("mars")

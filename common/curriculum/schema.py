@@ -39,11 +39,12 @@ from common.curriculum.hyperparams import resolve_hyperparams
 from common.curriculum.policy import algorithm_class
 from common.curriculum.policy_file import ALGORITHMS
 from common.errors import ConfigError, quote
-from common.generators import KINDS, SUITES, generate
+from common.generators import KINDS, SUITES
 from common.observations import LAYOUTS
 from common.rewards import resolve_reward_spec
-from common.scenario import RobotProfile, Scenario, pydantic_error
-from common.tiers import TIERS
+from common.scenario import RobotProfile, pydantic_error
+from common.sources import scenario_source
+from common.tiers import TIERS, generator_template
 from common.yaml_io import read_yaml_mapping
 
 
@@ -167,16 +168,12 @@ def _check_env_kwargs(stage: StageSpec, source: str | Path, field: str) -> None:
 
 
 def _check_robot_fits(stage: StageSpec, robot: RobotProfile) -> None:
-    """A robot too wide for the stage's generator kinds finds no layout: say so before training
-    (the first scenario of each kind is drawn as the env would draw it)."""
+    """A robot too wide for the stage's generator kinds finds no layout: the env's scenario source
+    tries one of each kind when it is made, so make it now, before training, as the env will."""
     spec = stage.scenarios
-    if stage.world == "physics3d":
-        from physics3d.robot import TEMPLATE as template
-    else:
-        template = Scenario()
-    template = template.model_copy(update={"robot": robot})
-    for kind in [spec.kind] if spec.kind else list(spec.mix or ()):
-        generate(kind, 0, spec.difficulty, "train", template)
+    if spec.kind or spec.mix:
+        template = generator_template(stage.world).model_copy(update={"robot": robot})
+        scenario_source(spec.kind or spec.mix, spec.difficulty, template)
 
 
 def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
