@@ -62,6 +62,11 @@ class Actuator:
         """Whether commands pass through unchanged (the cheap path)."""
         return self.delay_range == (0, 0) and self.gain_range is None and self.dynamics is None
 
+    @property
+    def draws(self) -> bool:
+        """Whether :meth:`reset` draws from its generator (a delay or a gain given as a range)."""
+        return self.delay_range[1] > self.delay_range[0] or self.gain_range is not None
+
     def reset(self, rng: np.random.Generator) -> None:
         """Start an episode: a delay and a motor gain drawn (each only if it is a range), an empty
         pipeline. A fixed delay draws nothing, so its episodes replay as before ranges existed."""

@@ -52,17 +52,6 @@ def box_sdf(points: np.ndarray, cx: float, cy: float, length: float, width: floa
     return out
 
 
-def box_corner_points(x: float, y: float, length: float, width: float, yaw: float) -> list[tuple[float, float]]:
-    """The four corners of a box, counter-clockwise, as (x, y) pairs.
-
-    Plain float arithmetic, so a corner is the same to the last bit on every machine (a matrix
-    product's rounding depends on the BLAS underneath).
-    """
-    c, s = math.cos(yaw), math.sin(yaw)
-    hl, hw = 0.5 * length, 0.5 * width
-    return [(x + u * c - v * s, y + u * s + v * c) for u, v in ((hl, hw), (-hl, hw), (-hl, -hw), (hl, -hw))]
-
-
 @njit(cache=True)
 def segment_distance(px: float, py: float, x1: float, y1: float, x2: float, y2: float) -> float:
     """Distance from the point (px, py) to the segment (x1, y1)-(x2, y2)."""
@@ -72,9 +61,27 @@ def segment_distance(px: float, py: float, x1: float, y1: float, x2: float, y2: 
     return math.hypot(px - (x1 + t * ex), py - (y1 + t * ey))
 
 
+@njit(cache=True)
+def box_corner_table(boxes: np.ndarray) -> np.ndarray:
+    """The corners (B, 4, 2), counter-clockwise, of boxes given as rows (x, y, cos yaw, sin yaw,
+    half length, half width).
+
+    Products and sums one by one, no matrix product (whose rounding depends on the BLAS
+    underneath) and no fused multiply-add, so a corner is the same to the last bit on every machine.
+    """
+    corners = np.empty((boxes.shape[0], 4, 2))
+    for k in range(boxes.shape[0]):
+        x, y, c, s, half_length, half_width = boxes[k, 0], boxes[k, 1], boxes[k, 2], boxes[k, 3], boxes[k, 4], boxes[k, 5]
+        for i, (u, v) in enumerate(((half_length, half_width), (-half_length, half_width),
+                                    (-half_length, -half_width), (half_length, -half_width))):
+            corners[k, i, 0] = x + u * c - v * s
+            corners[k, i, 1] = y + u * s + v * c
+    return corners
+
+
 def box_corners(x: float, y: float, length: float, width: float, yaw: float) -> np.ndarray:
     """The four corners (4, 2) of a box, counter-clockwise."""
-    return np.array(box_corner_points(x, y, length, width, yaw))
+    return box_corner_table(np.array([[x, y, math.cos(yaw), math.sin(yaw), 0.5 * length, 0.5 * width]]))[0]
 
 
 def segments_distance(points: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:

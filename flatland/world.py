@@ -21,7 +21,7 @@ from common.actuation import Actuator, WheelDynamics
 from common.kinematics import INTEGRATORS, Pose2D, WheelOdometry, wheel_speeds, wrap_angle
 from common.polygons import convex_pieces
 from common.readings import Imu, Odometry, Readings, frozen
-from common.geometry import box_corner_points
+from common.geometry import box_corner_table
 from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, SegmentObstacle, WorldSpec
 from flatland.clearance import path_clear
 from flatland.lidar import Lidar
@@ -72,6 +72,8 @@ class World:
         self._build_robot(scenario)
         self._integrate = INTEGRATORS[scenario.world.integrator]
         self.odometry = WheelOdometry(robot.wheel_radius, robot.wheel_base, robot.encoder_noise, self.rng, self._integrate)
+        # Seeding a Generator costs more than a noise-free episode's reset: skipped where nothing draws.
+        self._random = scenario.lidar.noise_std > 0.0 or robot.encoder_noise > 0.0 or self.actuator.draws
         self._dt = scenario.world.step_time
         self._limits = (robot.v_min, robot.v_max, robot.w_low, robot.w_max)
         self._accel = (robot.accel_v * self._dt, robot.accel_w * self._dt)
@@ -111,7 +113,7 @@ class World:
         """Put the scenario's obstacles in the space; return the lidar's circles, boxes and segments."""
         static = self.space.static_body
         circles: list[tuple[float, float, float]] = []
-        boxes: list[tuple[float, ...]] = []
+        boxes: list[tuple[float, ...]] = []  # the lidar's rows: x, y, cos yaw, sin yaw, half length, half width
         segments: list[np.ndarray] = [self._wall_edges]
         solids: list[np.ndarray] = []  # the bounds of polygons, whose outline alone leaves their inside unseen
         if self._pieces:
@@ -121,23 +123,11 @@ class World:
             if obstacle.unobstructed:
                 continue
             if isinstance(obstacle, CircleObstacle):
-                x, y, radius = obstacle.x, obstacle.y, obstacle.radius
-                if len(circles) < len(self._circles):
-                    circle = self._circles[len(circles)]
-                    circle.unsafe_set_radius(radius)
-                    circle.unsafe_set_offset((x, y))
-                else:
-                    self._circles.append(pymunk.Circle(static, radius, (x, y)))
-                circles.append((x, y, radius))
+                circles.append((obstacle.x, obstacle.y, obstacle.radius))
                 continue
             if isinstance(obstacle, BoxObstacle):
-                corners = box_corner_points(obstacle.x, obstacle.y, obstacle.length, obstacle.width, obstacle.yaw)
-                if len(boxes) < len(self._boxes):
-                    self._boxes[len(boxes)].unsafe_set_vertices(corners)
-                else:
-                    self._boxes.append(pymunk.Poly(static, corners))
-                c, s = math.cos(obstacle.yaw), math.sin(obstacle.yaw)
-                boxes.append((obstacle.x, obstacle.y, c, s, 0.5 * obstacle.length, 0.5 * obstacle.width))
+                boxes.append((obstacle.x, obstacle.y, math.cos(obstacle.yaw), math.sin(obstacle.yaw),
+                              0.5 * obstacle.length, 0.5 * obstacle.width))
                 continue
             if isinstance(obstacle, PolygonObstacle):
                 ring, closed = np.asarray(obstacle.vertices, dtype=float), True
@@ -151,6 +141,19 @@ class World:
                 self._pieces.extend(pymunk.Poly(static, [tuple(v) for v in piece]) for piece in convex_pieces(ring))
             else:
                 self._pieces.extend(pymunk.Segment(static, tuple(a), tuple(b), 0.0) for a, b in zip(ring[:-1], ring[1:]))
+        circle_table, box_table = np.array(circles).reshape(-1, 3), np.array(boxes).reshape(-1, 6)
+        for index, (x, y, radius) in enumerate(circles):
+            if index < len(self._circles):
+                self._circles[index].unsafe_set_radius(radius)
+                self._circles[index].unsafe_set_offset((x, y))
+            else:
+                self._circles.append(pymunk.Circle(static, radius, (x, y)))
+        # All corners in one array operation: per box in Python they cost more than the reshape.
+        for index, corners in enumerate(box_corner_table(box_table).tolist()):
+            if index < len(self._boxes):
+                self._boxes[index].unsafe_set_vertices(corners)
+            else:
+                self._boxes.append(pymunk.Poly(static, corners))
         self._use(self._circles, len(circles))
         self._use(self._boxes, len(boxes))
         if self._pieces:
@@ -158,7 +161,7 @@ class World:
         # Reshaped static shapes keep their old place in the space's index until reindexed.
         self.space.reindex_static()
         self._solids = np.array(solids).reshape(-1, 4)
-        return np.array(circles).reshape(-1, 3), np.array(boxes).reshape(-1, 6), np.vstack(segments)
+        return circle_table, box_table, np.vstack(segments)
 
     def _use(self, pool: list, count: int) -> None:
         """Have exactly the first ``count`` shapes of ``pool`` in the space."""
@@ -192,7 +195,7 @@ class World:
 
     def reset(self, seed: int | None = None) -> Readings:
         """Put the robot at the start, at rest; reseed the noise if ``seed`` is given."""
-        if seed is not None:
+        if seed is not None and self._random:
             self.rng = np.random.default_rng(seed)
             self.lidar.rng = self.odometry.rng = self.rng
         self.pose = self.scenario.start_pose

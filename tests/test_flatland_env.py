@@ -29,7 +29,9 @@ def test_env_passes_gymnasium_and_sb3_checkers(observation):
 @pytest.mark.parametrize("world", ["cluttered", "warehouse"])
 def test_reset_with_the_same_seed_replays_the_same_episodes(world):
     noisy = Scenario().model_copy(update={"lidar": Scenario().lidar.model_copy(update={"noise_std": 0.05})})
-    for kwargs in ({"world": world}, {"world": noisy}):
+    # Each source of noise alone: a world reseeds its generator only where something draws from it.
+    for kwargs in ({"world": world}, {"world": noisy}, {"world": world, "robot": {"encoder_noise": 0.05}},
+                   {"world": world, "motor_scale": (0.8, 1.2)}):
         env = make(observation="lidar43", **kwargs)
         assert same(rollout(env, 3), rollout(env, 3))
         assert not same(rollout(env, 3), rollout(env, 4))

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from common.errors import ConfigError
+from common.geometry import box_corner_table
 from common.generators import KINDS, SUITES, generate, get_suite
 from common.occupancy import OccupancyGrid, goal_reachable, path_exists, scenario_grid
 from common.scenario import (
@@ -261,3 +262,21 @@ def test_check_rejects_goal_inside_obstacle_and_start_outside_world():
 def test_box_corners_follow_yaw():
     box = BoxObstacle(x=0, y=0, length=2, width=1, yaw=math.pi / 2)
     np.testing.assert_allclose(np.sort(box.corners()[:, 0]), [-0.5, -0.5, 0.5, 0.5], atol=1e-12)
+
+
+def test_box_corner_table_is_the_rotation_formula_to_the_last_bit_and_counter_clockwise():
+    # pymunk's boxes and the lidar's are built from these corners: a matrix product or a fused
+    # multiply-add would round differently on another machine and move a contact by an ulp.
+    rng = np.random.default_rng(0)
+    rows, expected = [], []
+    for x, y, length, width, yaw in rng.uniform((-50, -50, 0.01, 0.01, -4), (50, 50, 5, 5, 4), (500, 5)).tolist():
+        c, s = math.cos(yaw), math.sin(yaw)
+        rows.append((x, y, c, s, 0.5 * length, 0.5 * width))
+        expected.append([(x + u * c - v * s, y + u * s + v * c) for u, v in
+                         ((0.5 * length, 0.5 * width), (-0.5 * length, 0.5 * width),
+                          (-0.5 * length, -0.5 * width), (0.5 * length, -0.5 * width))])
+    corners = box_corner_table(np.array(rows))
+    assert np.array_equal(corners, np.array(expected))
+    edges = np.roll(corners, -1, axis=1) - corners
+    turns = edges[:, :-1, 0] * edges[:, 1:, 1] - edges[:, :-1, 1] * edges[:, 1:, 0]
+    assert (turns > 0).all()  # every turn to the left
