@@ -63,6 +63,12 @@ def proximity(ctx: StepContext, threshold: float = 0.3) -> float:
     return max(0.0, threshold - ctx.min_range)
 
 
+def near_speed(ctx: StepContext, threshold: float = 0.5) -> float:
+    """Speed |v| (m/s) times how far the nearest return is inside ``threshold`` metres: prices
+    passing obstacles fast, where ``proximity`` prices only passing them close."""
+    return abs(ctx.v) * max(0.0, threshold - ctx.min_range)
+
+
 def proximity_bands(ctx: StepContext, bands: tuple[tuple[float, float], ...] = ((0.3, 5.0), (0.5, 1.0))) -> float:
     """The value of the first (distance, value) band whose distance exceeds the nearest return."""
     for distance, value in bands:
@@ -101,6 +107,7 @@ TERMS: dict[str, Callable[..., Any]] = {
     "time": time,
     "stuck": _Stuck,
     "proximity": proximity,
+    "near_speed": near_speed,
     "proximity_bands": proximity_bands,
     "spin": spin,
 }

@@ -108,6 +108,14 @@ def test_tutorial3d_preset_terms():
     assert total == pytest.approx(sum(shares.values()))
 
 
+def test_near_speed_prices_speed_only_inside_its_threshold():
+    reward = Reward({"near_speed": {"weight": -10.0, "threshold": 0.5}})
+    assert reward(_ctx(v=1.0, min_range=0.3))[0] == pytest.approx(-2.0)  # 1 m/s, 0.2 m inside
+    assert reward(_ctx(v=-0.5, min_range=0.3))[0] == pytest.approx(-1.0)  # reversing is speed too
+    assert reward(_ctx(v=0.0, min_range=0.3))[0] == 0.0  # standing close costs nothing
+    assert reward(_ctx(v=1.0, min_range=0.6))[0] == 0.0  # outside the threshold
+
+
 def test_stuck_fires_after_a_window_without_progress_and_resets():
     reward = Reward({"stuck": {"weight": -1.0, "window": 5, "threshold": 0.05}})
     values = [reward(_ctx(prev_distance=2.0, distance=2.0))[0] for _ in range(6)]
