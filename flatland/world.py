@@ -13,6 +13,7 @@ may go unseen.
 from __future__ import annotations
 
 import math
+from typing import Any, Callable
 
 import numpy as np
 import pymunk
@@ -36,6 +37,11 @@ def _between(a: Pose2D, b: Pose2D, fraction: float) -> Pose2D:
     """The pose a ``fraction`` of the way from ``a`` to ``b`` (straight, the shorter turn)."""
     return Pose2D(a[0] + fraction * (b[0] - a[0]), a[1] + fraction * (b[1] - a[1]),
                   wrap_angle(a[2] + fraction * wrap_angle(b[2] - a[2])))
+
+
+def _reshape_circle(circle: pymunk.Circle, row: tuple[float, float, float]) -> None:
+    circle.unsafe_set_radius(row[2])
+    circle.unsafe_set_offset(row[:2])
 
 
 def _edges(points: np.ndarray, closed: bool) -> np.ndarray:
@@ -73,7 +79,7 @@ class World:
         self._integrate = INTEGRATORS[scenario.world.integrator]
         self.odometry = WheelOdometry(robot.wheel_radius, robot.wheel_base, robot.encoder_noise, self.rng, self._integrate)
         # Seeding a Generator costs more than a noise-free episode's reset: skipped where nothing draws.
-        self._random = scenario.lidar.noise_std > 0.0 or robot.encoder_noise > 0.0 or self.actuator.draws
+        self._draws = scenario.lidar.noise_std > 0.0 or robot.encoder_noise > 0.0 or self.actuator.draws
         self._dt = scenario.world.step_time
         self._limits = (robot.v_min, robot.v_max, robot.w_low, robot.w_max)
         self._accel = (robot.accel_v * self._dt, robot.accel_w * self._dt)
@@ -142,20 +148,10 @@ class World:
             else:
                 self._pieces.extend(pymunk.Segment(static, tuple(a), tuple(b), 0.0) for a, b in zip(ring[:-1], ring[1:]))
         circle_table, box_table = np.array(circles).reshape(-1, 3), np.array(boxes).reshape(-1, 6)
-        for index, (x, y, radius) in enumerate(circles):
-            if index < len(self._circles):
-                self._circles[index].unsafe_set_radius(radius)
-                self._circles[index].unsafe_set_offset((x, y))
-            else:
-                self._circles.append(pymunk.Circle(static, radius, (x, y)))
-        # All corners in one array operation: per box in Python they cost more than the reshape.
-        for index, corners in enumerate(box_corner_table(box_table).tolist()):
-            if index < len(self._boxes):
-                self._boxes[index].unsafe_set_vertices(corners)
-            else:
-                self._boxes.append(pymunk.Poly(static, corners))
-        self._use(self._circles, len(circles))
-        self._use(self._boxes, len(boxes))
+        self._use(self._circles, circles, _reshape_circle, lambda row: pymunk.Circle(static, row[2], row[:2]))
+        # All corners in one compiled call: per box in Python they cost more than the reshape.
+        self._use(self._boxes, box_corner_table(box_table).tolist(), pymunk.Poly.unsafe_set_vertices,
+                  lambda corners: pymunk.Poly(static, corners))
         if self._pieces:
             self.space.add(*self._pieces)
         # Reshaped static shapes keep their old place in the space's index until reindexed.
@@ -163,12 +159,18 @@ class World:
         self._solids = np.array(solids).reshape(-1, 4)
         return circle_table, box_table, np.vstack(segments)
 
-    def _use(self, pool: list, count: int) -> None:
-        """Have exactly the first ``count`` shapes of ``pool`` in the space."""
+    def _use(self, pool: list, rows: list, reshape: Callable[[Any, Any], None], make: Callable[[Any], Any]) -> None:
+        """Have exactly ``len(rows)`` shapes of ``pool`` in the space, each shaped by its row: the
+        pool's shapes are reshaped in place, new ones made only when it runs short."""
+        for index, row in enumerate(rows):
+            if index < len(pool):
+                reshape(pool[index], row)
+            else:
+                pool.append(make(row))
         for index, shape in enumerate(pool):
-            if index < count and shape.space is None:
+            if index < len(rows) and shape.space is None:
                 self.space.add(shape)
-            elif index >= count and shape.space is not None:
+            elif index >= len(rows) and shape.space is not None:
                 self.space.remove(shape)
 
     def _build_robot(self, scenario: Scenario) -> None:
@@ -195,7 +197,7 @@ class World:
 
     def reset(self, seed: int | None = None) -> Readings:
         """Put the robot at the start, at rest; reseed the noise if ``seed`` is given."""
-        if seed is not None and self._random:
+        if seed is not None and self._draws:
             self.rng = np.random.default_rng(seed)
             self.lidar.rng = self.odometry.rng = self.rng
         self.pose = self.scenario.start_pose
