@@ -56,11 +56,8 @@ class Actuator:
         self.gain_range, self.dynamics = gain, dynamics
         self.delay, self.gain = self.delay_range[0], 1.0
         self._queue: collections.deque[tuple[float, float]] = collections.deque()
-
-    @property
-    def idle(self) -> bool:
-        """Whether commands pass through unchanged (the cheap path)."""
-        return self.delay_range == (0, 0) and self.gain_range is None and self.dynamics is None
+        #: Whether commands pass through unchanged (the cheap path); an attribute, as it is read every step.
+        self.idle = self.delay_range == (0, 0) and gain is None and dynamics is None
 
     @property
     def draws(self) -> bool:

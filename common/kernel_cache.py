@@ -20,11 +20,13 @@ from pathlib import Path
 from common.atomic import atomic_write
 
 ROOT = Path(__file__).resolve().parent.parent
-# Every module with cached numba kernels (tests/test_packaging.py checks the list).
+# Every module with cached numba kernels or with functions compiled into them (register_jitable);
+# tests/test_packaging.py checks the list.
 KERNEL_MODULES = (
     "common/geometry.py", "common/polygons.py", "common/placement.py", "common/layouts.py", "common/occupancy.py",
-    "common/irsim_format.py", "common/observations.py", "common/planners/astar.py", "common/planners/collision.py",
-    "common/planners/rrt.py", "common/planners/smoothing.py", "flatland/clearance.py", "flatland/lidar.py",
+    "common/irsim_format.py", "common/kinematics.py", "common/observations.py", "common/planners/astar.py",
+    "common/planners/collision.py", "common/planners/rrt.py", "common/planners/smoothing.py", "common/readings.py",
+    "flatland/clearance.py", "flatland/free_step.py", "flatland/lidar.py",
 )
 STAMP = "kernel-sources.sha256"
 

@@ -2,6 +2,8 @@
 
 Pure functions of floats (``math``, not numpy, because they run once per env step and numpy
 scalars are an order of magnitude slower there). Frame: x right, y up, yaw counter-clockwise.
+The pose updates are also compiled into flatland's step kernel (``register_jitable``: from Python
+they stay plain functions), so both paths compute the same bits.
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ import math
 from typing import Callable, NamedTuple
 
 import numpy as np
+from numba.extending import register_jitable
 
 
 class Pose2D(NamedTuple):
@@ -20,6 +23,7 @@ class Pose2D(NamedTuple):
     yaw: float
 
 
+@register_jitable
 def wrap_angle(angle: float) -> float:
     """Wrap an angle to [-pi, pi)."""
     wrapped = (angle + math.pi) % (2.0 * math.pi) - math.pi
@@ -27,12 +31,14 @@ def wrap_angle(angle: float) -> float:
     return wrapped if wrapped < math.pi else -math.pi
 
 
+@register_jitable
 def unicycle_euler(pose: Pose2D, v: float, w: float, dt: float) -> Pose2D:
     """One forward-Euler step, heading taken at the start of the step (IR-SIM's ``diff`` update)."""
     x, y, yaw = pose
     return Pose2D(x + v * math.cos(yaw) * dt, y + v * math.sin(yaw) * dt, wrap_angle(yaw + w * dt))
 
 
+@register_jitable
 def unicycle_exact(pose: Pose2D, v: float, w: float, dt: float) -> Pose2D:
     """The exact update for constant (v, w) over ``dt``: a circular arc, a straight line when w = 0."""
     x, y, yaw = pose
@@ -54,12 +60,14 @@ Integrator = Callable[[Pose2D, float, float, float], Pose2D]
 INTEGRATORS: dict[str, Integrator] = {"euler": unicycle_euler, "exact": unicycle_exact}
 
 
+@register_jitable
 def wheel_speeds(v: float, w: float, wheel_radius: float, wheel_base: float) -> tuple[float, float]:
     """Body velocity (v m/s, w rad/s) to wheel angular speeds (left, right) in rad/s."""
     half = 0.5 * wheel_base * w
     return (v - half) / wheel_radius, (v + half) / wheel_radius
 
 
+@register_jitable
 def body_velocity(
     left: float, right: float, wheel_radius: float, wheel_base: float
 ) -> tuple[float, float]:

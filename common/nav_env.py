@@ -14,7 +14,7 @@ import numpy as np
 from common.actions import ACTION_SPACE, ActionMapping
 from common.kinematics import wrap_angle
 from common.observations import DEFAULT_GOAL_DISTANCE_SCALE, ObservationLayout, make_layout
-from common.readings import Readings
+from common.readings import Readings, nearest_return
 from common.rewards import Reward, StepContext
 from common.conditions import Conditions, HeadingSource
 from common.errors import ConfigError, quote
@@ -147,7 +147,7 @@ class NavigationEnv(gym.Env):
         self._steps += 1
         distance, bearing = self._distance_and_bearing(readings)
         reached = distance < self._threshold
-        ctx = StepContext(distance, self._prev_distance, bearing, v, w, float(readings.lidar.min()), readings.collided, reached)
+        ctx = StepContext(distance, self._prev_distance, bearing, v, w, nearest_return(readings.lidar), readings.collided, reached)
         self._prev_distance = distance
         reward, shares = self.reward(ctx)
         # A crash is a termination, not a truncation: its value must not bootstrap from the next state.

@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 from numba import njit
+from numba.extending import register_jitable
 
 from common.scenario import LidarSpec
 
@@ -137,11 +138,12 @@ class Lidar:
     def __init__(self, spec: LidarSpec, circles: np.ndarray, boxes: np.ndarray, segments: np.ndarray,
                  rng: np.random.Generator) -> None:
         self.spec = spec
+        self._limited = spec.noise_std > 0.0 or spec.range_min > 0.0  # whether finish() has anything to do
         self.place(circles, boxes, segments)
         self.rng = rng
         angles = spec.beam_angles()
-        self._first = float(angles[0]) + spec.offset[2]
-        self._delta = float(angles[1] - angles[0]) if spec.beams > 1 else 0.0
+        self.first_beam = float(angles[0]) + spec.offset[2]  # in the robot frame, mounting yaw included
+        self.beam_step = float(angles[1] - angles[0]) if spec.beams > 1 else 0.0
 
     def place(self, circles: np.ndarray, boxes: np.ndarray, segments: np.ndarray) -> None:
         """Scan these primitives from now on (arrays as the constructor takes them)."""
@@ -151,21 +153,36 @@ class Lidar:
 
     def origin(self, x: float, y: float, yaw: float) -> tuple[float, float]:
         """The sensor's position for a robot pose."""
-        mx, my, _ = self.spec.offset
-        c, s = math.cos(yaw), math.sin(yaw)
-        return x + c * mx - s * my, y + s * mx + c * my
+        mount_x, mount_y, _ = self.spec.offset
+        return sensor_origin(x, y, yaw, mount_x, mount_y)
 
     def scan(self, x: float, y: float, yaw: float) -> np.ndarray:
         """Ranges for a robot at (x, y, yaw), in beam order; a new array each call."""
         ox, oy = self.origin(x, y, yaw)
         ranges = np.empty(self.spec.beams)
-        cast_scan(ox, oy, yaw + self._first, self._delta, self.circles, self.boxes, self.segments,
+        cast_scan(ox, oy, yaw + self.first_beam, self.beam_step, self.circles, self.boxes, self.segments,
                   self.spec.range_max, ranges)
-        if self.spec.noise_std > 0.0:
+        return self.finish(ranges)
+
+    def finish(self, ranges: np.ndarray) -> np.ndarray:
+        """What the sensor makes of exact ranges (``cast_scan``'s): noise, then its range limits; in place."""
+        spec = self.spec
+        if not self._limited:
+            return ranges
+        if spec.noise_std > 0.0:
             # Only returns carry noise; a beam that hit nothing keeps reading range_max (IR-SIM does the same).
-            hits = ranges < self.spec.range_max
-            ranges[hits] += self.rng.normal(0.0, self.spec.noise_std, int(hits.sum()))
-            np.minimum(ranges, self.spec.range_max, out=ranges)
-        if self.spec.range_min > 0.0 or self.spec.noise_std > 0.0:
-            np.maximum(ranges, self.spec.range_min, out=ranges)
+            hits = ranges < spec.range_max
+            ranges[hits] += self.rng.normal(0.0, spec.noise_std, int(hits.sum()))
+            np.minimum(ranges, spec.range_max, out=ranges)
+        if spec.range_min > 0.0 or spec.noise_std > 0.0:
+            np.maximum(ranges, spec.range_min, out=ranges)
         return ranges
+
+
+@register_jitable
+def sensor_origin(x: float, y: float, yaw: float, mount_x: float, mount_y: float) -> tuple[float, float]:
+    """Where a sensor mounted at (mount_x, mount_y) in the robot frame is, for a robot pose."""
+    if mount_x == 0.0 and mount_y == 0.0:
+        return x, y  # the common mount, on the robot's centre: no trigonometry in the step
+    c, s = math.cos(yaw), math.sin(yaw)
+    return x + c * mount_x - s * mount_y, y + s * mount_x + c * mount_y

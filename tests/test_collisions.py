@@ -471,3 +471,58 @@ def test_a_world_loads_only_scenarios_of_its_own_robot_lidar_and_world():
     assert not world.accepts(other)
     with pytest.raises(ValueError, match="same robot"):
         world.load(other)
+
+
+# --- the compiled step ------------------------------------------------------------------------
+
+
+def _drive_through_crashes(world: World, commands: np.ndarray) -> list[Readings]:
+    """Readings of a seeded drive that starts over after each crash."""
+    readings = [world.reset(seed=5)]
+    for v, w in commands:
+        readings.append(world.step(v, w))
+        if readings[-1].collided:
+            readings.append(world.reset())
+    return readings
+
+
+def _drive_counting_compiled(world: World, commands: np.ndarray) -> tuple[list[Readings], int]:
+    """:func:`_drive_through_crashes`, and how many of its steps the compiled path took."""
+    taken = 0
+    python_free_step = world._free_step
+
+    def counting(v: float, w: float):
+        nonlocal taken
+        ranges = python_free_step(v, w)
+        taken += ranges is not None
+        return ranges
+
+    world._free_step = counting
+    return _drive_through_crashes(world, commands), taken
+
+
+@pytest.mark.parametrize("variant", ["euler", "exact", "box_robot", "mounted_noisy_lidar"])
+def test_the_compiled_step_drives_exactly_as_the_python_step(variant):
+    # flatland.free_step does a clear move in one kernel; it must give the Python path's bits.
+    from common.generators import generate
+
+    scenario = generate("cluttered", 4)
+    if variant == "exact":
+        scenario = scenario.model_copy(update={"world": scenario.world.model_copy(update={"integrator": "exact"})})
+    elif variant == "box_robot":
+        scenario = scenario.model_copy(update={"robot": RobotProfile(shape="box", length=0.4, width=0.3)})
+    elif variant == "mounted_noisy_lidar":
+        lidar = scenario.lidar.model_copy(update={"offset": (0.1, -0.05, 0.3), "range_min": 0.05, "noise_std": 0.02})
+        scenario = scenario.model_copy(update={"lidar": lidar})
+    commands = np.random.default_rng(1).uniform((0.0, -1.0), (1.0, 1.0), size=(400, 2))
+    compiled, taken = _drive_counting_compiled(World(scenario, seed=5), commands)
+    python = World(scenario, seed=5)
+    python._compiled = False
+    assert_same_readings(compiled, _drive_through_crashes(python, commands))
+    assert taken > 200  # the compiled path really drove most of it
+    assert any(readings.collided for readings in compiled)  # and handed the contacts to the sweep
+
+
+def test_encoder_noise_keeps_the_step_in_python_to_keep_the_draw_order():
+    robot = RobotProfile(encoder_noise=0.05)
+    assert not make_world(robot=robot)._compiled and make_world()._compiled

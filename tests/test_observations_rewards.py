@@ -226,3 +226,14 @@ def test_the_default_reward_pays_for_reaching_the_goal():
             break
     assert info["is_success"] and info["reward_terms"]["goal"] == 100.0
     assert total > 100 + 10 * (4 * math.sqrt(2) - 0.3) - 0.05 * 60 - 1
+
+
+def test_the_nearest_return_is_the_smallest_range_wherever_it_lies():
+    from common.readings import nearest_return
+
+    ranges = np.random.default_rng(0).uniform(0.1, 5.0, 36)
+    for index in (0, 17, 35):
+        scan = ranges.copy()
+        scan[index] = 0.05
+        assert nearest_return(scan) == 0.05 == scan.min()
+    assert nearest_return(np.zeros(0)) == math.inf

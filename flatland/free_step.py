@@ -1,0 +1,54 @@
+"""A step whose move touches nothing, in one compiled call: most steps are such steps.
+
+In Python such a step passes through a dozen small calls (the pose update, the clearance test, the
+odometry, the scan), whose calling costs more than their arithmetic. :class:`flatland.World` takes
+this path for noise-free encoders (noise draws stay in Python, in their order) and falls back to
+its Python path, the full sweep against pymunk, when the move is not clear. The kernel calls the
+functions that path calls (compiled from the same source), so both compute the same bits.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from common.kinematics import Pose2D, body_velocity, unicycle_euler, unicycle_exact, wheel_speeds
+from flatland.clearance import path_clear
+from flatland.lidar import cast_scan, sensor_origin
+
+
+def step_constants(*, step_time: float, exact: bool, sweep_radius: float, wheel_radius: float, wheel_base: float,
+                   mount_x: float, mount_y: float, first_beam: float, beam_step: float, range_max: float) -> np.ndarray:
+    """The robot's and sensor's constants as :func:`free_step` takes them, in one array."""
+    return np.array([step_time, float(exact), sweep_radius, wheel_radius, wheel_base, mount_x, mount_y, first_beam,
+                     beam_step, range_max], dtype=np.float64)
+
+
+@njit(cache=True)
+def free_step(x, y, yaw, odometry_x, odometry_y, odometry_yaw, v, w, constants, circles, boxes, segments, solids,
+              ranges, out) -> bool:
+    """Advance the robot (pose x, y, yaw; odometry pose) by (v, w) for one step if no obstacle comes
+    within the swept capsule of its path (``path_clear``): then write the new pose, odometry pose
+    and odometry velocity into ``out`` (8 values), the exact scan from the new pose into ``ranges``,
+    and return True. Otherwise return False with nothing written."""
+    dt, exact, sweep = constants[0], constants[1], constants[2]
+    start = Pose2D(x, y, yaw)
+    end = unicycle_exact(start, v, w, dt) if exact else unicycle_euler(start, v, w, dt)
+    # As World._move: the bounding radius plus the sagitta of an arc bounds the swept footprint.
+    capsule = sweep + 0.125 * abs(v * w) * dt * dt
+    if not path_clear(x, y, end[0], end[1], capsule, circles, boxes, segments, solids):
+        return False
+    wheel_radius, wheel_base = constants[3], constants[4]
+    left, right = wheel_speeds(v, w, wheel_radius, wheel_base)
+    odometry_v, odometry_w = body_velocity(left, right, wheel_radius, wheel_base)
+    odometry = Pose2D(odometry_x, odometry_y, odometry_yaw)
+    if exact:
+        odometry = unicycle_exact(odometry, odometry_v, odometry_w, dt)
+    else:
+        odometry = unicycle_euler(odometry, odometry_v, odometry_w, dt)
+    out[0], out[1], out[2] = end
+    out[3], out[4], out[5] = odometry
+    out[6], out[7] = odometry_v, odometry_w
+    sensor_x, sensor_y = sensor_origin(end[0], end[1], end[2], constants[5], constants[6])
+    cast_scan(sensor_x, sensor_y, end[2] + constants[7], constants[8], circles, boxes, segments, constants[9], ranges)
+    return True
