@@ -260,7 +260,11 @@ class World:
             # IR-SIM's acceleration window around the velocity applied last step.
             v_lo, v_hi = max(v_lo, self.velocity[0] - self._accel[0]), min(v_hi, self.velocity[0] + self._accel[0])
             w_lo, w_hi = max(w_lo, self.velocity[1] - self._accel[1]), min(w_hi, self.velocity[1] + self._accel[1])
-        return min(max(v, v_lo), v_hi), min(max(w, w_lo), w_hi)
+        # min(max()) as comparisons (four builtin calls took four times as long, once a step), in the
+        # same order: a gain above 1 can leave the window's low end above the limit, and the limit wins.
+        v = v_lo if v < v_lo else v
+        w = w_lo if w < w_lo else w
+        return (v_hi if v > v_hi else v), (w_hi if w > w_hi else w)
 
     def _move(self, start: Pose2D, v: float, w: float) -> tuple[Pose2D, bool]:
         """Where the robot ends a step of (v, w) from ``start``, and whether it collided.

@@ -377,6 +377,17 @@ def test_acceleration_window():
     assert_allclose(slowing, [(0.95, 0.8), (0.90, 0.6), (0.85, 0.4)], atol=1e-12)
 
 
+def test_a_motor_gain_above_one_cannot_lift_the_acceleration_window_past_the_limit():
+    # The window is centred on the speed the wheels delivered (1.2 m/s with a 1.2 gain), whose low
+    # end then lies above v_max: the limit wins, so the command stays 1 m/s and the robot 1.2 m/s.
+    scenario = Scenario(world=WorldSpec(width=40.0, height=40.0, step_time=DT), lidar=LidarSpec(beams=8),
+                        robot=RobotProfile(v_max=1.0, accel_v=0.5), start=(1.0, 20.0, 0.0))
+    world = World(scenario, motor_scale=(1.2, 1.2))
+    world.reset(seed=0)
+    speeds = [world.step(1.0, 0.0).velocity[0] for _ in range(40)]
+    assert speeds[-1] == pytest.approx(1.2) and max(speeds) == pytest.approx(1.2)
+
+
 def test_acceleration_window_moves_the_robot_by_the_applied_speed():
     world = make_world(start=(5.0, 5.0, 0.0), robot=RobotProfile(accel_v=0.5))
     xs = [world.step(1.0, 0.0).pose.x for _ in range(3)]
