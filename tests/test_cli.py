@@ -73,6 +73,24 @@ def test_bench_json_has_the_agreed_keys(capsys, monkeypatch, tmp_path):
     assert results["ppo_steps_per_s_cluttered_subproc"] > 0 and results["ppo_subproc_vs_dummy"] > 0
 
 
+def test_bench_takes_the_faster_of_two_alternated_ppo_runs_of_each_setting(monkeypatch):
+    from common import bench
+
+    measured = iter([(100.0, 0.5), (80.0, 0.6), (60.0, 0.1), (120.0, 0.7), (70.0, 0.8), (90.0, 0.9)])
+    order = []
+
+    def fake(kind, steps, seed=0, vec_env="dummy"):
+        order.append((kind, vec_env))
+        return next(measured)
+
+    monkeypatch.setattr(bench, "ppo_steps_per_s", fake)
+    figures = bench._ppo_figures(2048)
+    assert order == [("sparse", "dummy"), ("cluttered", "dummy"), ("cluttered", "subproc")] * 2
+    assert figures["ppo_steps_per_s_sparse"] == 120.0 and figures["ppo_rollout_share_sparse"] == 0.7
+    assert figures["ppo_steps_per_s_cluttered"] == 80.0 and figures["ppo_cluttered_vs_sparse"] == round(80 / 120, 3)
+    assert figures["ppo_steps_per_s_cluttered_subproc"] == 90.0 and figures["ppo_subproc_vs_dummy"] == round(90 / 80, 3)
+
+
 def test_bench_gui_without_a_display_says_how_to_run_it(monkeypatch, capsys):
     monkeypatch.delenv("DISPLAY", raising=False)
     assert main(["bench", "--gui"]) == 2
