@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+from numba.extending import register_jitable
 
 from common.geometry import box_distance, segment_distance
 from common.polygons import orientation
@@ -50,6 +51,13 @@ def segment_box_gap(ax: float, ay: float, bx: float, by: float, cx: float, cy: f
                    (half_length, -half_width)):
         gap = min(gap, segment_distance(kx, ky, ux, uy, vx, vy))
     return gap
+
+
+@register_jitable
+def swept_capsule(bounding_radius: float, v: float, w: float, dt: float) -> float:
+    """The radius around the chord of a step of (v, w) that holds the footprint all along it: the
+    bounding radius plus the sagitta of the arc, R (1 - cos(θ/2)) <= |v| |w| dt² / 8."""
+    return bounding_radius + 0.125 * abs(v * w) * dt * dt
 
 
 @njit(cache=True)

@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+from numba.extending import register_jitable
 
 from common.kinematics import Pose2D, body_velocity, unicycle_euler, unicycle_exact, wheel_speeds
-from flatland.clearance import path_clear
+from flatland.clearance import path_clear, swept_capsule
 from flatland.lidar import cast_scan, sensor_origin
 
 
@@ -24,6 +25,12 @@ def step_constants(*, step_time: float, exact: bool, sweep_radius: float, wheel_
                      beam_step, range_max], dtype=np.float64)
 
 
+@register_jitable
+def _integrate(pose: Pose2D, v: float, w: float, dt: float, exact: bool) -> Pose2D:
+    """The world's integrator, chosen by flag (a kernel cannot take the Python function)."""
+    return unicycle_exact(pose, v, w, dt) if exact else unicycle_euler(pose, v, w, dt)
+
+
 @njit(cache=True)
 def free_step(x, y, yaw, odometry_x, odometry_y, odometry_yaw, v, w, constants, circles, boxes, segments, solids,
               ranges, out) -> bool:
@@ -31,21 +38,14 @@ def free_step(x, y, yaw, odometry_x, odometry_y, odometry_yaw, v, w, constants, 
     within the swept capsule of its path (``path_clear``): then write the new pose, odometry pose
     and odometry velocity into ``out`` (8 values), the exact scan from the new pose into ``ranges``,
     and return True. Otherwise return False with nothing written."""
-    dt, exact, sweep = constants[0], constants[1], constants[2]
-    start = Pose2D(x, y, yaw)
-    end = unicycle_exact(start, v, w, dt) if exact else unicycle_euler(start, v, w, dt)
-    # As World._move: the bounding radius plus the sagitta of an arc bounds the swept footprint.
-    capsule = sweep + 0.125 * abs(v * w) * dt * dt
-    if not path_clear(x, y, end[0], end[1], capsule, circles, boxes, segments, solids):
+    dt, exact = constants[0], constants[1] > 0.0
+    end = _integrate(Pose2D(x, y, yaw), v, w, dt, exact)
+    if not path_clear(x, y, end[0], end[1], swept_capsule(constants[2], v, w, dt), circles, boxes, segments, solids):
         return False
     wheel_radius, wheel_base = constants[3], constants[4]
     left, right = wheel_speeds(v, w, wheel_radius, wheel_base)
     odometry_v, odometry_w = body_velocity(left, right, wheel_radius, wheel_base)
-    odometry = Pose2D(odometry_x, odometry_y, odometry_yaw)
-    if exact:
-        odometry = unicycle_exact(odometry, odometry_v, odometry_w, dt)
-    else:
-        odometry = unicycle_euler(odometry, odometry_v, odometry_w, dt)
+    odometry = _integrate(Pose2D(odometry_x, odometry_y, odometry_yaw), odometry_v, odometry_w, dt, exact)
     out[0], out[1], out[2] = end
     out[3], out[4], out[5] = odometry
     out[6], out[7] = odometry_v, odometry_w

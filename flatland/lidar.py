@@ -174,8 +174,7 @@ class Lidar:
             hits = ranges < spec.range_max
             ranges[hits] += self.rng.normal(0.0, spec.noise_std, int(hits.sum()))
             np.minimum(ranges, spec.range_max, out=ranges)
-        if spec.range_min > 0.0 or spec.noise_std > 0.0:
-            np.maximum(ranges, spec.range_min, out=ranges)
+        np.maximum(ranges, spec.range_min, out=ranges)  # a floor, or noise that may dip below 0
         return ranges
 
 

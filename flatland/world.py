@@ -25,7 +25,7 @@ from common.polygons import convex_pieces
 from common.readings import Imu, Odometry, Readings, frozen
 from common.geometry import box_corner_table
 from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, SegmentObstacle, WorldSpec
-from flatland.clearance import path_clear
+from flatland.clearance import path_clear, swept_capsule
 from flatland.free_step import free_step, step_constants
 from flatland.lidar import Lidar
 
@@ -222,16 +222,18 @@ class World:
 
     def step(self, v: float, w: float) -> Readings:
         """Drive with (v m/s, w rad/s) for one step and return the new readings."""
+        ranges = None
         if self.stopped:
             v = w = 0.0
         else:
             v, w = self._clip(float(v), float(w))
             if not self.actuator.idle:
                 v, w = self.actuator(v, w, self._dt)
-        ranges = None if self.stopped or not self._compiled else self._free_step(v, w)
+            if self._compiled:
+                ranges = self._free_step(v, w)
+            if ranges is None:
+                self.pose, self.stopped = self._move(self.pose, v, w, test_clear=not self._compiled)
         if ranges is None:
-            if not self.stopped:
-                self.pose, self.stopped = self._move(self.pose, v, w)
             left, right = wheel_speeds(v, w, self.odometry.wheel_radius, self.odometry.wheel_base)
             self.odometry.update(left, right, self._dt)
             ranges = self.lidar.scan(*self.pose)
@@ -266,7 +268,7 @@ class World:
         w = w_lo if w < w_lo else w
         return (v_hi if v > v_hi else v), (w_hi if w > w_hi else w)
 
-    def _move(self, start: Pose2D, v: float, w: float) -> tuple[Pose2D, bool]:
+    def _move(self, start: Pose2D, v: float, w: float, test_clear: bool = True) -> tuple[Pose2D, bool]:
         """Where the robot ends a step of (v, w) from ``start``, and whether it collided.
 
         The move is swept along the integrator's path and the earliest contact decides. If the end
@@ -274,15 +276,16 @@ class World:
         stop mode does (so poses match IR-SIM's). If the first thing touched is behind the end pose
         (a thin wall jumped in one step, a wall a spinning box's corner swung through), it halts
         where it first touched it: IR-SIM, which checks end poses only, would let it through.
+        ``test_clear=False``: the compiled step has already found something near the path.
         """
         end = self._integrate(start, v, w, self._dt)
-        # The footprint stays within its bounding radius of the chord from start to end, plus the
-        # sagitta of an arc (R (1 - cos(θ/2)) <= |v| |w| dt² / 8): nothing there, nothing touched.
-        capsule = self._sweep_radius + 0.125 * abs(v * w) * self._dt * self._dt
+        # Nothing within the swept capsule, nothing touched: decided without pymunk's Python layer,
+        # which costs more than the rest of a move.
         lidar = self.lidar
-        if path_clear(start[0], start[1], end[0], end[1], capsule, lidar.circles, lidar.boxes, lidar.segments,
-                      self._solids):
-            return end, False  # decided without pymunk's Python layer, which costs more than the rest of a move
+        capsule = swept_capsule(self._sweep_radius, v, w, self._dt)
+        if test_clear and path_clear(start[0], start[1], end[0], end[1], capsule, lidar.circles, lidar.boxes,
+                                     lidar.segments, self._solids):
+            return end, False
         # Something is near the path. (Space.segment_query with a radius is no substitute for what
         # follows: chipmunk walks its tree with the bare segment and misses shapes that only the
         # radius reaches; the bounding-box query rarely comes back empty now, for a path near a
