@@ -1,7 +1,4 @@
-"""Shared core of the navigation curriculum: kinematics, scenarios, observations, rewards, CLI."""
-
-from common.kernel_cache import refresh as _refresh_kernel_cache
+"""Shared core of the navigation curriculum: kinematics, scenarios, observations, rewards, controllers,
+planners, evaluation. The ``curriculum`` application (runner, sweeps, bench, CLI) is :mod:`common.curriculum`."""
 
 __version__ = "0.1.0"
-
-_refresh_kernel_cache()  # before any module defines a cached kernel

@@ -45,32 +45,23 @@ class WheelDynamics:
 
 class Actuator:
     """A command's way to the wheels: ``delay`` whole control steps late (the robot keeps the last
-    command it got; at the start, standing still), scaled by a motor gain drawn per episode from
-    ``gain`` = (low, high), then through ``dynamics`` if any. ``delay`` = (low, high) draws a whole
-    number of steps per episode from that range, ends included.
+    command it got; at the start, standing still), scaled by a motor ``gain``, then through
+    ``dynamics`` if any. The delay and the gain are the episode's (:meth:`reset`; drawn by
+    :meth:`common.conditions.Conditions.draw`).
     """
 
-    def __init__(self, delay: int | tuple[int, int] = 0, gain: tuple[float, float] | None = None,
-                 dynamics: WheelDynamics | None = None) -> None:
-        self.delay_range = (delay, delay) if isinstance(delay, int) else (int(delay[0]), int(delay[1]))
-        self.gain_range, self.dynamics = gain, dynamics
-        self.delay, self.gain = self.delay_range[0], 1.0
+    def __init__(self, dynamics: WheelDynamics | None = None) -> None:
+        self.dynamics = dynamics
+        self.delay, self.gain = 0, 1.0
         self._queue: collections.deque[tuple[float, float]] = collections.deque()
         #: Whether commands pass through unchanged (the cheap path); an attribute, as it is read every step.
-        self.idle = self.delay_range == (0, 0) and gain is None and dynamics is None
+        self.idle = dynamics is None
 
-    @property
-    def draws(self) -> bool:
-        """Whether :meth:`reset` draws from its generator (a delay or a gain given as a range)."""
-        return self.delay_range[1] > self.delay_range[0] or self.gain_range is not None
-
-    def reset(self, rng: np.random.Generator) -> None:
-        """Start an episode: a delay and a motor gain drawn (each only if it is a range), an empty
-        pipeline. A fixed delay draws nothing, so its episodes replay as before ranges existed."""
-        low, high = self.delay_range
-        self.delay = int(rng.integers(low, high + 1)) if high > low else low
-        self._queue = collections.deque([(0.0, 0.0)] * self.delay)
-        self.gain = float(rng.uniform(*self.gain_range)) if self.gain_range is not None else 1.0
+    def reset(self, delay: int = 0, gain: float = 1.0) -> None:
+        """Start an episode with this delay (steps) and motor gain: an empty pipeline, wheels at rest."""
+        self.delay, self.gain = delay, gain
+        self._queue = collections.deque([(0.0, 0.0)] * delay)
+        self.idle = delay == 0 and gain == 1.0 and self.dynamics is None
         if self.dynamics is not None:
             self.dynamics.reset()
 

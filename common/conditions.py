@@ -27,7 +27,13 @@ knob               meaning                                                  flat
                    or ``gyro`` (the wheels still give the speed)
 ``gyro_noise``     σ of each gyroscope reading, rad/s                        (3D only)  0.005
 ``gyro_bias``      σ of the gyroscope's bias, drawn per episode, rad/s       (3D only)  0.0005
+``accel_noise``    σ of each accelerometer reading, m/s²                     (3D only)  0.05
 =================  ======================================================  =========  ===========
+
+A world takes its conditions whole (``World(scenario, seed, conditions)``), fills the tier's
+defaults (:meth:`Conditions.for_tier`) and, at every reset, draws the episode's values with
+:meth:`Conditions.draw`, in the order that method fixes. Adding a knob is a field here (with its
+bounds, its tier default and a row above) and its use in the tier it applies to.
 
 Why these physics3d defaults: a 2D lidar of the RPLIDAR class measures to about 1 % (1 cm at 1 m);
 wheel encoders with tyre slip err by about 1 % per wheel; motors and wheel radii vary by a few
@@ -43,8 +49,9 @@ consumer parts), and 0.005 rad/s of noise per reading.
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, NamedTuple
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from common.errors import ConfigError
@@ -54,15 +61,25 @@ from common.scenario import RobotProfile, Scenario
 Range = tuple[Annotated[float, Field(gt=0.0, le=10.0)], Annotated[float, Field(gt=0.0, le=10.0)]]
 Steps = Annotated[int, Field(ge=0, le=20)]
 HeadingSource = Literal["wheels", "gyro"]
-ONLY_3D = ("friction", "mass_scale", "control_period", "heading_source", "gyro_noise", "gyro_bias")
+ONLY_3D = ("friction", "mass_scale", "control_period", "heading_source", "gyro_noise", "gyro_bias", "accel_noise")
 ONLY_2D = ("dynamics",)
 
 TIER_DEFAULTS: dict[str, dict[str, Any]] = {
     "flatland": {"action_delay": 0, "dynamics": "kinematic"},
     "physics3d": {"robot": "physics3d", "lidar_noise": 0.01, "odometry_noise": 0.01, "action_delay": 0,
                   "motor_scale": (0.95, 1.05), "friction": (0.8, 1.2), "mass_scale": (0.9, 1.1),
-                  "heading_source": "gyro", "gyro_noise": 0.005, "gyro_bias": 0.0005},
+                  "heading_source": "gyro", "gyro_noise": 0.005, "gyro_bias": 0.0005, "accel_noise": 0.05},
 }
+
+
+class EpisodeDraw(NamedTuple):
+    """The values a world's conditions take for one episode (:meth:`Conditions.draw`)."""
+
+    action_delay: int
+    motor_gain: float
+    friction: float | None  # None: the robot's own
+    mass_scale: float | None
+    gyro_bias: tuple[float, float, float]
 
 
 class Conditions(BaseModel):
@@ -82,6 +99,7 @@ class Conditions(BaseModel):
     heading_source: HeadingSource | None = None
     gyro_noise: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
     gyro_bias: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
+    accel_noise: Annotated[float, Field(ge=0.0, le=10.0)] | None = None
 
     @field_validator("robot")
     @classmethod
@@ -145,15 +163,43 @@ class Conditions(BaseModel):
             update["lidar"] = scenario.lidar.model_copy(update={"noise_std": self.lidar_noise})
         return scenario.model_copy(update=update) if update else scenario
 
-    def world_kwargs(self, tier: str) -> dict[str, Any]:
-        """The keyword arguments of the tier's World that these (resolved) conditions set."""
-        kwargs: dict[str, Any] = {"action_delay": self.action_delay or 0, "motor_scale": self.motor_scale}
-        if tier == "flatland":
-            kwargs["dynamics"] = self.dynamics or "kinematic"
-        else:
-            kwargs.update(friction=self.friction, mass_scale=self.mass_scale, control_period=self.control_period,
-                          heading_source=self.heading_source, gyro_noise=self.gyro_noise, gyro_bias=self.gyro_bias)
-        return kwargs
+    @property
+    def delay_range(self) -> tuple[int, int]:
+        """``action_delay`` as (low, high) steps."""
+        delay = self.action_delay or 0
+        return (delay, delay) if isinstance(delay, int) else delay
+
+    def draws(self, scenario: Scenario) -> bool:
+        """Whether an episode of ``scenario`` (as conditioned) under these conditions draws random
+        numbers: sensor noise, or a knob given as a range. A world that draws nothing need not
+        reseed its generator per episode."""
+        ranges = (self.motor_scale, self.friction, self.mass_scale)
+        return (scenario.lidar.noise_std > 0.0 or scenario.robot.encoder_noise > 0.0 or bool(self.gyro_noise)
+                or bool(self.gyro_bias) or bool(self.accel_noise) or _varies(self.delay_range)
+                or any(_varies(r) for r in ranges if r is not None))
+
+    def draw(self, rng: np.random.Generator) -> EpisodeDraw:
+        """This episode's values, drawn from ``rng`` in a fixed order (delay, motor gain, friction,
+        mass, gyro bias). A fixed value (a knob unset, a number, or a range whose ends agree) draws
+        nothing, so adding a fixed knob leaves every other draw, and so every episode, as it was."""
+        delay = _uniform_int(rng, self.delay_range)
+        gain = _uniform(rng, self.motor_scale) if self.motor_scale is not None else 1.0
+        friction = _uniform(rng, self.friction) if self.friction is not None else None
+        mass = _uniform(rng, self.mass_scale) if self.mass_scale is not None else None
+        bias = tuple(rng.normal(0.0, self.gyro_bias, 3).tolist()) if self.gyro_bias else (0.0, 0.0, 0.0)
+        return EpisodeDraw(delay, gain, friction, mass, bias)
+
+
+def _varies(limits: tuple[float, float]) -> bool:
+    return limits[1] > limits[0]
+
+
+def _uniform(rng: np.random.Generator, limits: tuple[float, float]) -> float:
+    return float(rng.uniform(*limits)) if _varies(limits) else float(limits[0])
+
+
+def _uniform_int(rng: np.random.Generator, limits: tuple[int, int]) -> int:
+    return int(rng.integers(limits[0], limits[1] + 1)) if _varies(limits) else int(limits[0])
 
 
 CONDITION_KEYS = tuple(Conditions.model_fields)

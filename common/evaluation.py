@@ -1,9 +1,10 @@
 """Evaluate any agent (controller, planner + follower, policy) on scenarios in a tier.
 
-Per episode: outcome (success, collision, timeout, stuck), steps, path length, wall time and SPL
-(Anderson et al. 2018: success x shortest / max(shortest, taken)); the shortest path is A* on the
-scenario's ground-truth grid, less the goal radius, since an episode ends on entering it.
-Aggregates carry mean ± std and 95% Wilson intervals for the rates.
+Per episode: outcome (success, collision, timeout, stuck: decided by :class:`common.task.Task`, as
+the env decides it), steps, path length, wall time and SPL (Anderson et al. 2018: success x
+shortest / max(shortest, taken)); the shortest path is A* on the scenario's ground-truth grid, less
+the goal radius, since an episode ends on entering it. Aggregates carry mean ± std and 95% Wilson
+intervals for the rates.
 """
 
 from __future__ import annotations
@@ -19,12 +20,8 @@ from scipy import stats
 from common.conditions import Conditions
 from common.readings import Readings
 from common.scenario import LidarSpec, RobotProfile, Scenario
+from common.task import DEFAULT_MAX_STEPS, OUTCOMES, Task
 from common.tiers import make_world
-
-OUTCOMES = ("success", "collision", "timeout", "stuck")
-DEFAULT_MAX_STEPS = 500
-STUCK_WINDOW = 100  # steps
-STUCK_DISTANCE = 0.1  # m: an agent that moved less than this over the window is stuck
 
 
 class Agent(Protocol):
@@ -58,17 +55,18 @@ class Episode:
     wall_time: float
 
 
-def shortest_path_length(scenario: Scenario, resolution: float = 0.1) -> float:
+def shortest_path_length(scenario: Scenario, goal_radius: float | None = None, resolution: float = 0.1) -> float:
     """Length of the A* path on the ground-truth grid (inflated by the robot's radius), less the goal
-    radius. Where the inflated grid blocks the start or the goal (a hand-made file may put either
-    near an obstacle), the straight-line distance stands in: a lower bound, so SPL errs low."""
+    radius (default the scenario's). Where the inflated grid blocks the start or the goal (a
+    hand-made file may put either near an obstacle), the straight-line distance stands in: a lower
+    bound, so SPL errs low."""
     from common.occupancy import scenario_grid
     from common.planners.astar import AStar, path_length
 
     grid = scenario_grid(scenario, resolution)
     path = AStar().plan(grid, scenario.start[:2], scenario.goal)
     length = path_length(path) if path is not None else math.dist(scenario.start[:2], scenario.goal)
-    return max(length - scenario.goal_threshold, 0.0)
+    return max(length - (scenario.goal_threshold if goal_radius is None else goal_radius), 0.0)
 
 
 def episode_limit(agent: Agent, max_steps: int | None) -> int:
@@ -85,45 +83,33 @@ def run_episode(
     on_step: Callable[[Readings], None] | None = None,
     shortest: float | None = None,
     conditions: Conditions | None = None,
+    goal_radius: float | None = None,
 ) -> Episode:
     """Drive ``agent`` in a fresh world of ``scenario`` under ``conditions`` (the tier's defaults
-    where unset); ``on_step`` sees every readings (e.g. to render). ``max_steps`` defaults to the
-    agent's own (see :func:`episode_limit`)."""
-    max_steps = episode_limit(agent, max_steps)
+    where unset), judged within ``goal_radius`` (default the scenario's); ``on_step`` sees every
+    readings (e.g. to render). ``max_steps`` defaults to the agent's own (see :func:`episode_limit`)."""
+    task = Task(goal_radius, episode_limit(agent, max_steps), judge_stuck=True)
     world = make_world(tier, scenario, seed=seed, conditions=conditions)
     scenario = world.scenario  # as conditioned: the robot the agent drives, its sensors' noise
     readings = world.reset(seed=seed)
-    agent.bind(scenario.robot, scenario.lidar, scenario.goal_threshold)
+    task.start(scenario, readings)
+    agent.bind(scenario.robot, scenario.lidar, task.radius)
     agent.reset()
     if on_step:
         on_step(readings)
-    gx, gy = scenario.goal
-    travelled = 0.0
-    recent = [travelled]
-    outcome, steps = "timeout", 0
+    outcome = None
     start = time.perf_counter()
-    while steps < max_steps:
+    while outcome is None:
         v, w = agent.act(readings, scenario.goal)
-        previous = readings.pose
         readings = world.step(v, w)
-        steps += 1
-        travelled += math.hypot(readings.pose[0] - previous[0], readings.pose[1] - previous[1])
         if on_step:
             on_step(readings)
-        if math.hypot(gx - readings.pose[0], gy - readings.pose[1]) < scenario.goal_threshold:
-            outcome = "success"
-            break
-        if readings.collided:
-            outcome = "collision"
-            break
-        recent.append(travelled)
-        if len(recent) > STUCK_WINDOW and recent[-1] - recent[-1 - STUCK_WINDOW] < STUCK_DISTANCE:
-            outcome = "stuck"
-            break
+        outcome = task.step(readings)
     wall = time.perf_counter() - start
-    shortest = shortest_path_length(scenario) if shortest is None else shortest
+    shortest = shortest_path_length(scenario, task.radius) if shortest is None else shortest
+    travelled = task.travelled
     spl = shortest / max(shortest, travelled) if outcome == "success" and shortest > 0 else float(outcome == "success")
-    return Episode(agent.name, scenario.name, seed, outcome, steps, travelled, shortest, spl, wall)
+    return Episode(agent.name, scenario.name, seed, outcome, task.steps, travelled, shortest, spl, wall)
 
 
 def wilson_interval(successes: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
@@ -199,17 +185,19 @@ def evaluate(
     max_steps: int | None = None,
     progress: Callable[[int], None] | None = None,
     conditions: Conditions | None = None,
+    goal_radius: float | None = None,
 ) -> list[Summary]:
     """Every agent on the same scenarios with the same seeds (episode i uses ``seed + i``) under the
-    same ``conditions``; ``max_steps`` defaults to each agent's own (see :func:`episode_limit`)."""
+    same ``conditions``, judged within ``goal_radius`` (default each scenario's own); ``max_steps``
+    defaults to each agent's own (see :func:`episode_limit`)."""
     resolved = (conditions or Conditions()).for_tier(tier)
     scenarios = [resolved.scenario(s) for s in scenarios]
-    shortest = [shortest_path_length(s) for s in scenarios]
+    shortest = [shortest_path_length(s, goal_radius) for s in scenarios]
     results: dict[str, list[Episode]] = {a.name: [] for a in agents}
     for agent in agents:
         for i, (scenario, best) in enumerate(zip(scenarios, shortest)):
             results[agent.name].append(run_episode(agent, scenario, tier, seed + i, max_steps, shortest=best,
-                                                   conditions=resolved))
+                                                   conditions=resolved, goal_radius=goal_radius))
             if progress:
                 progress(1)
     return [summarise(name, rows) for name, rows in results.items()]

@@ -10,17 +10,16 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from matplotlib.path import Path as _MplPath
-from numba import njit
+from common.kernel_cache import kernel
 
 
-@njit(cache=True)
+@kernel
 def circle_distance(px: float, py: float, cx: float, cy: float, radius: float) -> float:
     """Signed distance from the point (px, py) to a circle."""
     return math.hypot(px - cx, py - cy) - radius
 
 
-@njit(cache=True)
+@kernel
 def box_distance(px: float, py: float, cx: float, cy: float, length: float, width: float, c: float, s: float) -> float:
     """Signed distance from the point (px, py) to a box whose yaw has cosine ``c`` and sine ``s``."""
     dx, dy = px - cx, py - cy
@@ -33,7 +32,7 @@ def box_distance(px: float, py: float, cx: float, cy: float, length: float, widt
     return max(qx, qy)
 
 
-@njit(cache=True)
+@kernel
 def circle_sdf(points: np.ndarray, cx: float, cy: float, radius: float) -> np.ndarray:
     """Signed distance from ``points`` (N, 2) to a circle."""
     out = np.empty(points.shape[0])
@@ -42,7 +41,7 @@ def circle_sdf(points: np.ndarray, cx: float, cy: float, radius: float) -> np.nd
     return out
 
 
-@njit(cache=True)
+@kernel
 def box_sdf(points: np.ndarray, cx: float, cy: float, length: float, width: float, yaw: float) -> np.ndarray:
     """Signed distance to a box of ``length`` along its local x and ``width`` along local y."""
     c, s = math.cos(yaw), math.sin(yaw)
@@ -52,7 +51,7 @@ def box_sdf(points: np.ndarray, cx: float, cy: float, length: float, width: floa
     return out
 
 
-@njit(cache=True)
+@kernel
 def segment_distance(px: float, py: float, x1: float, y1: float, x2: float, y2: float) -> float:
     """Distance from the point (px, py) to the segment (x1, y1)-(x2, y2)."""
     ex, ey = x2 - x1, y2 - y1
@@ -61,7 +60,7 @@ def segment_distance(px: float, py: float, x1: float, y1: float, x2: float, y2: 
     return math.hypot(px - (x1 + t * ex), py - (y1 + t * ey))
 
 
-@njit(cache=True)
+@kernel
 def box_corner_table(boxes: np.ndarray) -> np.ndarray:
     """The corners (B, 4, 2), counter-clockwise, of boxes given as rows (x, y, cos yaw, sin yaw,
     half length, half width).
@@ -102,5 +101,22 @@ def polygon_edges(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def polygon_sdf(points: np.ndarray, vertices: np.ndarray) -> np.ndarray:
     """Signed distance to a simple polygon given by its vertices (K, 2), either winding."""
     dist = segments_distance(points, *polygon_edges(vertices))
-    inside = _MplPath(vertices).contains_points(points)
+    inside = points_in_polygon(np.ascontiguousarray(points, dtype=np.float64), np.ascontiguousarray(vertices, dtype=np.float64))
     return np.where(inside, -dist, dist)
+
+
+@kernel
+def points_in_polygon(points: np.ndarray, vertices: np.ndarray) -> np.ndarray:
+    """Whether each point (N, 2) lies inside the closed ring (K, 2), by the even-odd crossing rule."""
+    inside = np.zeros(len(points), dtype=np.bool_)
+    k = len(vertices)
+    for i in range(len(points)):
+        px, py = points[i, 0], points[i, 1]
+        crossings = False
+        for j in range(k):
+            x1, y1 = vertices[j - 1, 0], vertices[j - 1, 1]
+            x2, y2 = vertices[j, 0], vertices[j, 1]
+            if (y1 > py) != (y2 > py) and px < x1 + (py - y1) * (x2 - x1) / (y2 - y1):
+                crossings = not crossings
+        inside[i] = crossings
+    return inside

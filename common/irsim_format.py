@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import Any, Callable, Hashable, NamedTuple
 
 import numpy as np
-from numba import njit
+from common.kernel_cache import kernel
 from pydantic import BaseModel, ValidationError
 
 from common.errors import ConfigError, quote
@@ -363,14 +363,14 @@ def _random_points(draws: _Draws, low: list[float], high: list[float], number: i
     return states, goals
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def _too_close(dx: float, dy: float, min_distance: float) -> bool:
     """IR-SIM's spacing rule to the last bit: ``np.linalg.norm`` of the xy difference, i.e. the
     square root of the sum of squares (not ``hypot``, which rounds differently and is slower)."""
     return math.sqrt(dx * dx + dy * dy) < min_distance
 
 
-@njit(cache=True)
+@kernel
 def _spaced_points(rng, low: np.ndarray, high: np.ndarray, number: int, min_distance: float,
                    budget: int) -> tuple[np.ndarray, int]:
     """Two sets of ``number`` points (states, then goals) and how many spacing checks they took;

@@ -1,23 +1,26 @@
-"""numba's on-disk kernel cache, kept true when a module that a kernel calls into changes.
+"""Compiled kernels whose on-disk cache goes stale when any module they call into changes.
 
 numba keys a cached kernel on its own source file only (upstream proposals to follow the
 callees' files, numba PRs 8396 and 9563, were not merged). A kernel in ``occupancy.py`` that
 inlines a ``geometry.py`` function would keep the old machine code after ``geometry.py`` alone
-changed, as after a ``git pull`` into an editable install: silently wrong, not slow. So at import
-the package hashes the sources of every module holding cached kernels; when the hash differs from
-the one recorded beside the caches, it deletes those modules' cache files and numba recompiles.
+changed, as after a ``git pull`` into an editable install: silently wrong, not slow.
 
-This covers caches kept beside the sources (numba's choice wherever the package directory is
-writable, as in an editable install). A non-writable install keeps them in numba's user-wide
-directory, but it is replaced whole on upgrade, so every module's own stamp changes anyway.
+:func:`kernel` is ``numba.njit(cache=True)`` with one difference: a cached kernel's source stamp
+is its own file's *and* a hash of every module in :data:`KERNEL_MODULES`. A cache compiled
+against other sources no longer matches its stamp, so numba itself recompiles and overwrites it.
+Nothing is deleted or written at import (numba probes a cache directory by writing to it, so the
+cache is made when its kernel first compiles); the hash is computed once per process, by reading.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 from pathlib import Path
+from typing import Callable
 
-from common.atomic import atomic_write
+from numba import njit
+from numba.core.caching import CompileResultCacheImpl, FunctionCache, InTreeCacheLocator, UserWideCacheLocator
 
 ROOT = Path(__file__).resolve().parent.parent
 # Every module with cached numba kernels or with functions compiled into them (register_jitable);
@@ -28,9 +31,9 @@ KERNEL_MODULES = (
     "common/planners/collision.py", "common/planners/rrt.py", "common/planners/smoothing.py", "common/readings.py",
     "flatland/clearance.py", "flatland/free_step.py", "flatland/lidar.py",
 )
-STAMP = "kernel-sources.sha256"
 
 
+@functools.lru_cache(maxsize=None)
 def sources_digest(root: Path = ROOT, modules: tuple[str, ...] = KERNEL_MODULES) -> str:
     """One hash over the kernel modules' sources (a missing module hashes as empty)."""
     digest = hashlib.sha256()
@@ -41,19 +44,47 @@ def sources_digest(root: Path = ROOT, modules: tuple[str, ...] = KERNEL_MODULES)
     return digest.hexdigest()
 
 
-def refresh(root: Path = ROOT, modules: tuple[str, ...] = KERNEL_MODULES) -> bool:
-    """Delete the kernel modules' cache files if their sources changed since the last refresh;
-    whether they had. Never raises for a file system that refuses: caching is an optimisation."""
-    stamp = root / "common" / "__pycache__" / STAMP
-    digest = sources_digest(root, modules)
-    try:
-        if stamp.is_file() and stamp.read_text() == digest:
-            return False
-        for module in modules:
-            path = root / module
-            for cached in (path.parent / "__pycache__").glob(f"{path.stem}.*.nb[ic]"):
-                cached.unlink(missing_ok=True)
-        atomic_write(stamp, lambda tmp: tmp.write_text(digest))
-    except OSError:
+def cached_kernels(root: Path, modules: tuple[str, ...]) -> Callable:
+    """A ``kernel`` decorator whose caches are stamped with the sources of ``modules`` under ``root``."""
+
+    class Stamped:
+        def get_source_stamp(self):
+            return super().get_source_stamp(), sources_digest(root, modules)
+
+    class InTree(Stamped, InTreeCacheLocator):
         pass
-    return True
+
+    class UserWide(Stamped, UserWideCacheLocator):
+        pass
+
+    class Impl(CompileResultCacheImpl):
+        _locator_classes = [InTree, UserWide]
+
+    class Cache(FunctionCache):
+        _impl_class = Impl
+
+    class OnFirstUse:
+        """The cache, made when the kernel first compiles: making it probes (writes to) its directory."""
+
+        def __init__(self, python_function: Callable) -> None:
+            self.python_function, self.made = python_function, None
+
+        def __getattr__(self, name: str):
+            if self.made is None:
+                self.made = Cache(self.python_function)
+            return getattr(self.made, name)
+
+    def kernel(function: Callable | None = None, **options) -> Callable:
+        """``numba.njit(cache=True, **options)``, its cache stamped with every kernel module's source."""
+
+        def compile_cached(python_function: Callable) -> Callable:
+            dispatcher = njit(**options)(python_function)
+            dispatcher._cache = OnFirstUse(dispatcher.py_func)  # njit(cache=True) sets a Cache here
+            return dispatcher
+
+        return compile_cached(function) if function is not None else compile_cached
+
+    return kernel
+
+
+kernel = cached_kernels(ROOT, KERNEL_MODULES)

@@ -29,7 +29,7 @@ from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from common.kernel_cache import kernel
 
 from common.placement import BOX, CIRCLE, OUTLINE_POINTS, place
 
@@ -50,20 +50,20 @@ class Step(NamedTuple):
     optional: bool = False  # a shape that finds no place is left out instead of failing the layout
 
 
-@njit(cache=True)
+@kernel
 def _uniform(rng, low: float, high: float) -> float:
     # NumPy's uniform(low, high) is low + (high - low) * random(): the same draws, bit for bit.
     return low + (high - low) * rng.random()
 
 
-@njit(cache=True)
+@kernel
 def _anywhere(rng, world: np.ndarray) -> tuple[float, float]:
     x0, y0, width, height = world[0], world[1], world[2], world[3]
     x = _uniform(rng, x0, x0 + width)
     return x, _uniform(rng, y0, y0 + height)
 
 
-@njit(cache=True)
+@kernel
 def _near_route(rng, ends: np.ndarray, spread: float) -> tuple[float, float]:
     """A point on the start-goal segment's middle stretch, jittered sideways."""
     t = _uniform(rng, 0.25, 0.75)
@@ -73,13 +73,13 @@ def _near_route(rng, ends: np.ndarray, spread: float) -> tuple[float, float]:
     return sx + t * (gx - sx) - side * math.sin(heading), sy + t * (gy - sy) + side * math.cos(heading)
 
 
-@njit(cache=True)
+@kernel
 def _circle(rng, x: float, y: float, r_min: float, r_max: float, out: np.ndarray) -> int:
     out[0], out[1], out[2], out[3], out[4] = x, y, _uniform(rng, r_min, r_max), 0.0, 0.0
     return CIRCLE
 
 
-@njit(cache=True)
+@kernel
 def _box(rng, x: float, y: float, side_min: float, side_max: float, out: np.ndarray) -> int:
     length = _uniform(rng, side_min, side_max)
     width = _uniform(rng, side_min, side_max)
@@ -87,7 +87,7 @@ def _box(rng, x: float, y: float, side_min: float, side_max: float, out: np.ndar
     return BOX
 
 
-@njit(cache=True)
+@kernel
 def _propose(rng, recipe: int, sizes: np.ndarray, spread: float, world: np.ndarray, ends: np.ndarray,
              out: np.ndarray) -> int:
     """Draw one shape of the recipe into ``out`` (x, y and three size parameters); its kind."""
@@ -111,7 +111,7 @@ def _propose(rng, recipe: int, sizes: np.ndarray, spread: float, world: np.ndarr
     return _circle(rng, x, y, sizes[0], sizes[1], out)
 
 
-@njit(cache=True)
+@kernel
 def _start_goal(rng, world: np.ndarray, min_distance: float, margin: float) -> np.ndarray:
     """A start (x, y, yaw: any) and a goal (x, y) at least ``min_distance`` apart, ``margin`` inside
     the world, as (start x, start y, yaw, goal x, goal y)."""
@@ -124,7 +124,7 @@ def _start_goal(rng, world: np.ndarray, min_distance: float, margin: float) -> n
             return np.array([sx, sy, _uniform(rng, -math.pi, math.pi), gx, gy])
 
 
-@njit(cache=True)
+@kernel
 def _lay_out(rng, world: np.ndarray, min_distance: float, recipes: np.ndarray, counts: np.ndarray,
              tries: np.ndarray, optional: np.ndarray, sizes: np.ndarray, spreads: np.ndarray, robot_radius: float,
              kinds: np.ndarray, params: np.ndarray, steps: np.ndarray) -> tuple[np.ndarray, int, bool]:

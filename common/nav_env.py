@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any, Mapping, Protocol, Sequence
+from typing import Any, Mapping, Sequence
 
 import gymnasium as gym
 import numpy as np
@@ -16,21 +16,11 @@ from common.kinematics import wrap_angle
 from common.observations import DEFAULT_GOAL_DISTANCE_SCALE, ObservationLayout, make_layout
 from common.readings import Readings, nearest_return
 from common.rewards import Reward, StepContext
-from common.conditions import Conditions, HeadingSource
-from common.errors import ConfigError, quote
-from common.scenario import MAX_LENGTH, Scenario
+from common.conditions import Conditions
+from common.scenario import Scenario
 from common.sources import ScenarioSource, scenario_source
-from common.tiers import generator_template
-
-
-class WorldLike(Protocol):
-    """What the env needs of a tier's world."""
-
-    scenario: Scenario
-
-    def reset(self, seed: int | None = None) -> Readings: ...
-
-    def step(self, v: float, w: float) -> Readings: ...
+from common.task import DEFAULT_MAX_STEPS, GoalThreshold, Task
+from common.tiers import WorldLike, generator_template
 
 
 class NavigationEnv(gym.Env):
@@ -45,53 +35,43 @@ class NavigationEnv(gym.Env):
         observation: str = "nav7",
         reward: str | Mapping[str, Any] = "default",
         render_mode: str | None = None,
-        max_steps: int = 500,
+        max_steps: int = DEFAULT_MAX_STEPS,
         difficulty: float = 0.5,
         goal_distance_scale: float = DEFAULT_GOAL_DISTANCE_SCALE,
         template: Scenario | None = None,
         action_mapping: str = "linear",
         resample: bool = False,
-        goal_threshold: float | Sequence[float] | None = None,
-        robot: str | Mapping[str, Any] | None = None,
-        lidar_noise: float | None = None,
-        odometry_noise: float | None = None,
-        action_delay: int | tuple[int, int] | None = None,
-        motor_scale: Sequence[float] | None = None,
-        friction: Sequence[float] | None = None,
-        mass_scale: Sequence[float] | None = None,
-        control_period: float | None = None,
-        dynamics: str | None = None,
-        heading_source: HeadingSource | None = None,
-        gyro_noise: float | None = None,
-        gyro_bias: float | None = None,
+        goal_threshold: GoalThreshold = None,
+        **conditions: Any,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode {render_mode!r}; allowed: None, {', '.join(self.metadata['render_modes'])}")
         self.render_mode = render_mode
-        given = dict(robot=robot, lidar_noise=lidar_noise, odometry_noise=odometry_noise, action_delay=action_delay,
-                     motor_scale=motor_scale, friction=friction, mass_scale=mass_scale, control_period=control_period,
-                     dynamics=dynamics, heading_source=heading_source, gyro_noise=gyro_noise, gyro_bias=gyro_bias)
-        self.conditions = Conditions.parse({k: v for k, v in given.items() if v is not None}).for_tier(self.tier)
+        # Every other keyword is a condition knob (common.conditions), validated there by name.
+        self.conditions = Conditions.parse({k: v for k, v in conditions.items() if v is not None}).for_tier(self.tier)
         template = template or generator_template(self.tier)
         if self.conditions.profile is not None:
             # Generated scenarios leave gaps sized for the robot that will drive them.
             template = template.model_copy(update={"robot": self.conditions.profile})
         self.source = scenario_source(world, difficulty, template, resample)
-        self.goal_threshold = threshold_range(goal_threshold)
+        self.task = Task(goal_threshold, max_steps)
         self.observation_name = observation
         self.action_mapping = action_mapping
         self.goal_distance_scale = goal_distance_scale
         self.reward = Reward(reward)
-        self.max_steps = int(max_steps)
         self.action_space = ACTION_SPACE
+        self.world: WorldLike | None = None
         self._drawn: Scenario | None = None
         self._load(self.source.draw(np.random.default_rng(0)))
         self.observation_space = self.layout.space
         self._readings: Readings | None = None
         self._pending_rng: dict | None = None
-        self._steps = 0
-        self._prev_distance = 0.0
         self.trajectory: list[tuple[float, float]] = []
+
+    @property
+    def max_steps(self) -> int:
+        """Steps before an episode is truncated."""
+        return self.task.max_steps
 
     def _build_world(self, scenario: Scenario) -> WorldLike:
         raise NotImplementedError
@@ -105,18 +85,16 @@ class NavigationEnv(gym.Env):
         env's conditions (``self.scenario`` is the scenario as conditioned: robot, sensor noise)."""
         previous = None if self._drawn is None else self.scenario
         self._drawn = drawn
-        self.scenario = scenario = self.conditions.scenario(drawn)
-        self.world = self._build_world(scenario)
+        self.world = self._build_world(drawn)
+        self.scenario = scenario = self.world.scenario
         if previous is None or scenario.robot != previous.robot or scenario.lidar != previous.lidar:
             self.layout = self._make_layout(scenario)
             self.actions = ActionMapping(scenario.robot, self.action_mapping)
         self._goal = scenario.goal
-        self._threshold = scenario.goal_threshold
 
-    def _distance_and_bearing(self, readings: Readings) -> tuple[float, float]:
+    def _bearing(self, readings: Readings) -> float:
         x, y, yaw = readings.pose
-        dx, dy = self._goal[0] - x, self._goal[1] - y
-        return math.hypot(dx, dy), wrap_angle(math.atan2(dy, dx) - yaw)
+        return wrap_angle(math.atan2(self._goal[1] - y, self._goal[0] - x) - yaw)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
         """Start an episode; ``options={"resample": True}`` redraws a random world file's layout
@@ -129,32 +107,28 @@ class NavigationEnv(gym.Env):
             self._load(drawn)
         scenario = self.scenario
         self._readings = self.world.reset(seed=int(self.np_random.integers(2**31 - 1)))
-        if self.goal_threshold is not None:
-            low, high = self.goal_threshold
-            self._threshold = float(self.np_random.uniform(low, high)) if high > low else low
+        self.task.start(scenario, self._readings, self.np_random)
         self.reward.reset()
-        self._steps = 0
-        self._prev_distance, _ = self._distance_and_bearing(self._readings)
         self.trajectory = [tuple(self._readings.pose[:2])]
         if self.render_mode == "human":
             self.render()
-        info = {"distance": self._prev_distance, "scenario": scenario.name, "goal_threshold": self._threshold}
+        info = {"distance": self.task.distance, "scenario": scenario.name, "goal_threshold": self.task.radius}
         return self.layout(self._readings, self._goal), info
 
     def step(self, action) -> tuple[np.ndarray, float, bool, bool, dict]:
         v, w = self.actions.to_velocity(action)
         readings = self._readings = self.world.step(v, w)
-        self._steps += 1
-        distance, bearing = self._distance_and_bearing(readings)
-        reached = distance < self._threshold
-        ctx = StepContext(distance, self._prev_distance, bearing, v, w, nearest_return(readings.lidar), readings.collided, reached)
-        self._prev_distance = distance
+        task, previous = self.task, self.task.distance
+        outcome = task.step(readings)
+        reached = outcome == "success"
+        ctx = StepContext(task.distance, previous, self._bearing(readings), v, w, nearest_return(readings.lidar),
+                          readings.collided, reached)
         reward, shares = self.reward(ctx)
         # A crash is a termination, not a truncation: its value must not bootstrap from the next state.
-        terminated = reached or readings.collided
-        truncated = not terminated and self._steps >= self.max_steps
+        terminated = reached or outcome == "collision"
+        truncated = outcome == "timeout"
         self.trajectory.append((readings.pose[0], readings.pose[1]))
-        info = {"reward_terms": shares, "distance": distance, "is_success": reached, "collided": readings.collided}
+        info = {"reward_terms": shares, "distance": task.distance, "is_success": reached, "collided": readings.collided}
         if self.render_mode == "human":
             self.render()
         return self.layout(readings, self._goal), float(reward), terminated, truncated, info
@@ -172,30 +146,3 @@ class NavigationEnv(gym.Env):
     def readings(self) -> Readings | None:
         """The last readings (None before the first reset)."""
         return self._readings
-
-
-def judged_radius(env_kwargs: Mapping[str, Any]) -> float | None:
-    """The goal radius a policy trained with ``env_kwargs`` is judged by: its ``goal_threshold``,
-    the smallest of a range (it trained to arrive that close), or None (each scenario's own)."""
-    limits = threshold_range(env_kwargs.get("goal_threshold"))
-    return None if limits is None else limits[0]
-
-
-def with_radius(scenarios: Sequence[Scenario], radius: float | None) -> list[Scenario]:
-    """The scenarios judged at ``radius`` (unchanged for None)."""
-    return list(scenarios) if radius is None else [s.model_copy(update={"goal_threshold": radius}) for s in scenarios]
-
-
-def threshold_range(value: float | Sequence[float] | None) -> tuple[float, float] | None:
-    """``goal_threshold`` as (low, high): None keeps each scenario's, a number fixes it, a pair is drawn
-    from uniformly per episode (so a policy learns to arrive whatever radius it is judged by)."""
-    if value is None:
-        return None
-    pair = (value, value) if isinstance(value, (int, float)) and not isinstance(value, bool) else value
-    try:
-        low, high = (float(v) for v in pair)
-    except (TypeError, ValueError):
-        raise ConfigError(None, "goal_threshold", f"got {quote(value)}; allowed: null, a number or [low, high] in metres") from None
-    if not (0.0 < low <= high <= MAX_LENGTH):
-        raise ConfigError(None, "goal_threshold", f"got {quote(value)}; allowed: 0 < low <= high <= {MAX_LENGTH:g} m")
-    return low, high

@@ -44,7 +44,7 @@ from typing import Callable
 
 import numpy as np
 from gymnasium import spaces
-from numba import njit
+from common.kernel_cache import kernel
 
 from common.errors import ConfigError, quote
 from common.kinematics import wrap_angle
@@ -85,7 +85,7 @@ def sector_bounds(beams: int, sectors: int) -> np.ndarray:
     return np.column_stack([starts, ends])
 
 
-@njit(cache=True)
+@kernel
 def _encode(out, goal, v, w, yaw_rate, ranges, bounds, inv_range, floor, log_scale, low, high):
     """Fill ``out``: the goal terms (x, y, heading, distance: ``_goal_terms``) at 0-2 and last, v
     and w at 3-4, the yaw rate at 5 where the sectors start at 6, then each sector's nearest return,

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
-from numba import njit
+from common.kernel_cache import kernel
 from scipy import ndimage
 
 from common.geometry import box_distance, circle_distance
@@ -107,7 +107,7 @@ def shapes_grid(world: WorldSpec, kinds: np.ndarray, params: np.ndarray, resolut
     return OccupancyGrid(occupied=occupied, origin=(x0, y0), resolution=resolution)
 
 
-@njit(cache=True)
+@kernel
 def _cell_span(low: float, high: float, origin: float, resolution: float, cells: int) -> tuple[int, int]:
     """The cells [first, last) whose centres may lie within [low, high], one spare cell each side."""
     first = math.floor((low - origin) / resolution - 0.5) - 1
@@ -115,7 +115,7 @@ def _cell_span(low: float, high: float, origin: float, resolution: float, cells:
     return max(0, min(cells, first)), max(0, min(cells, last))
 
 
-@njit(cache=True)
+@kernel
 def _cell_centres(x0: float, y0: float, resolution: float, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
     """The centres (N, 2) of the cells in rows [r0, r1) and columns [c0, c1), row by row."""
     centres = np.empty(((r1 - r0) * (c1 - c0), 2))
@@ -128,7 +128,7 @@ def _cell_centres(x0: float, y0: float, resolution: float, r0: int, r1: int, c0:
     return centres
 
 
-@njit(cache=True)
+@kernel
 def _rasterise(occupied: np.ndarray, kinds: np.ndarray, params: np.ndarray, x0: float, y0: float,
                resolution: float, inflation: float) -> None:
     """Mark the cells within ``inflation`` of each circle or box (a kind and five parameters).
@@ -155,7 +155,7 @@ def _rasterise(occupied: np.ndarray, kinds: np.ndarray, params: np.ndarray, x0: 
                     occupied[row, col] = True
 
 
-@njit(cache=True)
+@kernel
 def _mark_walls(occupied: np.ndarray, x0: float, y0: float, width: float, height: float, resolution: float,
                 inflation: float) -> None:
     """Mark the cells whose centres lie within ``inflation`` of the world's boundary."""
@@ -185,7 +185,7 @@ def path_exists(grid: OccupancyGrid, start: Sequence[float], goal: Sequence[floa
                     goal[0], goal[1], threshold)
 
 
-@njit(cache=True)
+@kernel
 def _reaches(occupied: np.ndarray, start: tuple[int, int], x0: float, y0: float, resolution: float,
              gx: float, gy: float, threshold: float) -> bool:
     """Whether a free cell 8-connected to the start cell has its centre within ``threshold`` of the goal.

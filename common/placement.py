@@ -11,14 +11,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from common.kernel_cache import kernel
 
 from common.geometry import box_distance, circle_distance
 
 CIRCLE, BOX = 0, 1
 
 
-@njit(cache=True)
+@kernel
 def any_within(kind: int, params: np.ndarray, points: np.ndarray, limit: float) -> bool:
     """Whether any of the points (N, 2) lies nearer than ``limit`` to the shape (a circle or a box
     as a kind and five parameters); stops at the first that does."""
@@ -34,13 +34,13 @@ def any_within(kind: int, params: np.ndarray, points: np.ndarray, limit: float) 
     return False
 
 
-@njit(cache=True)
+@kernel
 def bounding_radius(kind: int, params: np.ndarray) -> float:
     """The radius about the shape's centre (x, y) that holds it."""
     return params[2] if kind == CIRCLE else 0.5 * math.hypot(params[2], params[3])
 
 
-@njit(cache=True)
+@kernel
 def shape_bounds(kind: int, params: np.ndarray) -> tuple[float, float, float, float]:
     """The axis-aligned box (x_min, y_min, x_max, y_max) holding the shape."""
     x, y = params[0], params[1]
@@ -61,7 +61,7 @@ _UNIT_CIRCLE = np.column_stack([np.cos(_ANGLES), np.sin(_ANGLES)])  # a constant
 _CORNER_SIGNS = ((1.0, 1.0), (-1.0, 1.0), (-1.0, -1.0), (1.0, -1.0), (1.0, 1.0))  # counter-clockwise, closed
 
 
-@njit(cache=True)
+@kernel
 def outline(kind: int, params: np.ndarray, out: np.ndarray) -> None:
     """Write 32 points along the shape's boundary into ``out`` (enough to measure gaps between
     convex shapes): a circle's evenly spaced, a box's eight steps along each side from its corner."""
@@ -83,7 +83,7 @@ def outline(kind: int, params: np.ndarray, out: np.ndarray) -> None:
             out[k * _SIDE_POINTS + i, 1] = y0 + step * (y1 - y0)
 
 
-@njit(cache=True)
+@kernel
 def place(kind: int, params: np.ndarray, low: np.ndarray, high: np.ndarray, ends: np.ndarray, end_clearance: float,
           clearance: float, kinds: np.ndarray, placed: np.ndarray, outlines: np.ndarray, count: int) -> bool:
     """Record the shape as the ``count``-th placed one if it fits; whether it did.

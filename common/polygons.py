@@ -1,10 +1,9 @@
-"""Simple polygons as convex pieces: what physics engines that collide convex shapes only need."""
+"""Simple polygons: area, winding, convexity and simplicity (the checks a scenario file passes)."""
 
 from __future__ import annotations
 
 import numpy as np
-import pymunk.autogeometry
-from numba import njit
+from common.kernel_cache import kernel
 
 
 def signed_area(vertices: np.ndarray) -> float:
@@ -21,19 +20,19 @@ def is_convex(vertices: np.ndarray) -> bool:
     return bool(np.all(cross >= -1e-12) or np.all(cross <= 1e-12))
 
 
-@njit(cache=True)
+@kernel
 def orientation(ax: float, ay: float, bx: float, by: float, cx: float, cy: float) -> float:
     """Twice the signed area of the triangle (a, b, c)."""
     return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
 
 
-@njit(cache=True)
+@kernel
 def _on_segment(ax: float, ay: float, bx: float, by: float, px: float, py: float) -> bool:
     """Whether p, known to be collinear with segment ab, lies within it."""
     return min(ax, bx) <= px <= max(ax, bx) and min(ay, by) <= py <= max(ay, by)
 
 
-@njit(cache=True)
+@kernel
 def _edges_meet(v: np.ndarray) -> bool:
     """Whether any edge of the closed ring meets a non-adjacent edge (touching counts)."""
     n = v.shape[0]
@@ -63,16 +62,3 @@ def is_simple_polygon(vertices: np.ndarray) -> bool:
     if len(vertices) < 3 or abs(signed_area(vertices)) < 1e-12:
         return False
     return not _edges_meet(vertices)
-
-
-def convex_pieces(vertices: np.ndarray) -> list[np.ndarray]:
-    """A simple polygon (K, 2), either winding, as counter-clockwise convex polygons covering it exactly."""
-    vertices = np.asarray(vertices, dtype=float)
-    if signed_area(vertices) < 0:
-        vertices = vertices[::-1]  # pymunk decomposes counter-clockwise rings only
-    if is_convex(vertices):
-        return [vertices]
-    ring = [tuple(v) for v in vertices] + [tuple(vertices[0])]
-    # Each hull comes back closed (its first vertex repeated last).
-    hulls = [np.array([tuple(v) for v in hull[:-1]]) for hull in pymunk.autogeometry.convex_decomposition(ring, 0.0)]
-    return [hull if signed_area(hull) > 0 else hull[::-1] for hull in hulls]

@@ -6,7 +6,7 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from common.kernel_cache import kernel
 
 from common.kinematics import Pose2D
 
@@ -59,7 +59,7 @@ def frozen(array: np.ndarray) -> np.ndarray:
     return array
 
 
-@njit(cache=True)
+@kernel
 def nearest_return(ranges: np.ndarray) -> float:
     """The smallest range of a scan (inf for none): ``ranges.min()`` costs five times more per step."""
     nearest = math.inf

@@ -3,14 +3,23 @@
 from __future__ import annotations
 
 import importlib
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from common.conditions import Conditions
 from common.errors import ConfigError, quote
+from common.readings import Readings
 from common.scenario import Scenario
 
-if TYPE_CHECKING:
-    from common.nav_env import WorldLike
+
+class WorldLike(Protocol):
+    """What the env and the evaluator need of a tier's world."""
+
+    scenario: Scenario
+
+    def reset(self, seed: int | None = None) -> Readings: ...
+
+    def step(self, v: float, w: float) -> Readings: ...
+
 
 _WORLDS = {"flatland": "flatland.world:World", "physics3d": "physics3d.world:World"}
 # What each tier's generator kinds draw scenarios around (flatland: the defaults of Scenario).
@@ -32,9 +41,7 @@ def _load(tier: str, table: dict[str, str]) -> Any:
 def make_world(tier: str, scenario: Scenario, seed: int | None = None, conditions: Conditions | None = None) -> WorldLike:
     """A world of the named tier built from ``scenario`` under ``conditions`` (the tier's defaults
     where unset; :mod:`common.conditions`). ``world.scenario`` is the scenario as conditioned."""
-    world_class = _load(tier, _WORLDS)
-    resolved = (conditions or Conditions()).for_tier(tier)
-    return world_class(resolved.scenario(scenario), seed=seed, **resolved.world_kwargs(tier))
+    return _load(tier, _WORLDS)(scenario, seed=seed, conditions=conditions)
 
 
 def generator_template(tier: str) -> Scenario:

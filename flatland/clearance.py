@@ -11,7 +11,7 @@ from __future__ import annotations
 
 
 import numpy as np
-from numba import njit
+from common.kernel_cache import kernel
 from numba.extending import register_jitable
 
 from common.geometry import box_distance, segment_distance
@@ -21,7 +21,7 @@ from flatland.lidar import slab
 _MARGIN = 1e-9  # m: a distance this close to the radius counts as within it (rounding)
 
 
-@njit(cache=True)
+@kernel
 def segments_gap(ax: float, ay: float, bx: float, by: float, cx: float, cy: float, dx: float, dy: float) -> float:
     """Distance between the segments AB and CD (0 where they cross)."""
     if (orientation(ax, ay, bx, by, cx, cy) * orientation(ax, ay, bx, by, dx, dy) < 0.0
@@ -32,7 +32,7 @@ def segments_gap(ax: float, ay: float, bx: float, by: float, cx: float, cy: floa
                segment_distance(cx, cy, ax, ay, bx, by), segment_distance(dx, dy, ax, ay, bx, by))
 
 
-@njit(cache=True)
+@kernel
 def segment_box_gap(ax: float, ay: float, bx: float, by: float, cx: float, cy: float, c: float, s: float,
                     half_length: float, half_width: float) -> float:
     """Distance between the segment AB and a box (centre, yaw cosine and sine, half sides); 0 where
@@ -60,7 +60,7 @@ def swept_capsule(bounding_radius: float, v: float, w: float, dt: float) -> floa
     return bounding_radius + 0.125 * abs(v * w) * dt * dt
 
 
-@njit(cache=True)
+@kernel
 def path_clear(ax: float, ay: float, bx: float, by: float, radius: float, circles: np.ndarray, boxes: np.ndarray,
                segments: np.ndarray, solids: np.ndarray) -> bool:
     """Whether no obstacle comes within ``radius`` of the segment from (ax, ay) to (bx, by).

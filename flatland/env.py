@@ -48,8 +48,7 @@ class NavEnv(NavigationEnv):
     ## Arguments
     ``gymnasium.make("flatland/Nav-v0", world="sparse", observation="nav7", reward="default",
     render_mode=None, max_steps=500, difficulty=0.5, goal_distance_scale=10.0, template=None,
-    action_mapping="linear", resample=False,
-    goal_threshold=None)``
+    action_mapping="linear", resample=False, goal_threshold=None, **conditions)``
 
     * ``world``: a :class:`Scenario`, a list of them, a kind (``open``, ``sparse``, ``cluttered``,
       ``warehouse``, ``trap``) or the path of a scenario or IR-SIM world YAML.
@@ -60,6 +59,9 @@ class NavEnv(NavigationEnv):
       drawn per episode from the env's seed (``info["goal_threshold"]`` at reset).
     * ``resample``: redraw a random IR-SIM world file every episode instead of restoring its
       initial state; ``reset(options={"resample": True})`` redraws once.
+    * ``**conditions``: the knobs of :mod:`common.conditions` (``robot``, ``lidar_noise``,
+      ``odometry_noise``, ``action_delay``, ``motor_scale``, ``dynamics``), flatland's defaults
+      (an ideal robot) where unset.
 
     ## Example
     >>> import gymnasium as gym, flatland
@@ -80,7 +82,7 @@ class NavEnv(NavigationEnv):
         if self.world is not None and self.world.accepts(scenario):
             self.world.load(scenario)
             return self.world
-        return World(scenario, **self.conditions.world_kwargs("flatland"))
+        return World(scenario, conditions=self.conditions)
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None or self.readings is None:

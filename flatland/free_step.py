@@ -10,7 +10,7 @@ functions that path calls (compiled from the same source), so both compute the s
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from common.kernel_cache import kernel
 from numba.extending import register_jitable
 
 from common.kinematics import Pose2D, body_velocity, unicycle_euler, unicycle_exact, wheel_speeds
@@ -31,7 +31,7 @@ def _integrate(pose: Pose2D, v: float, w: float, dt: float, exact: bool) -> Pose
     return unicycle_exact(pose, v, w, dt) if exact else unicycle_euler(pose, v, w, dt)
 
 
-@njit(cache=True)
+@kernel
 def free_step(x, y, yaw, odometry_x, odometry_y, odometry_yaw, v, w, constants, circles, boxes, segments, solids,
               ranges, out) -> bool:
     """Advance the robot (pose x, y, yaw; odometry pose) by (v, w) for one step if no obstacle comes

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from common.kernel_cache import kernel
 from numba.extending import register_jitable
 
 from common.scenario import LidarSpec
@@ -20,7 +20,7 @@ _EPS = 1e-9  # a hit nearer than this is the sensor's own surface, not an obstac
 _TWO_PI = 2.0 * math.pi
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def _hit_circle(ox, oy, dx, dy, cx, cy, r):
     fx, fy = ox - cx, oy - cy
     c = fx * fx + fy * fy - r * r
@@ -32,7 +32,7 @@ def _hit_circle(ox, oy, dx, dy, cx, cy, r):
     return -b - math.sqrt(disc) if c > 0.0 else -b + math.sqrt(disc)
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def slab(p, q, half, t_near, t_far):
     """Narrow [t_near, t_far] to where p + t q lies within [-half, half] (empty: t_near > t_far)."""
     if q == 0.0:
@@ -41,7 +41,7 @@ def slab(p, q, half, t_near, t_far):
     return max(t_near, min(t1, t2)), min(t_far, max(t1, t2))
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def _hit_box(ox, oy, dx, dy, cx, cy, cos_yaw, sin_yaw, half_length, half_width):
     # Slab test in the box's frame: one test per box instead of four edge tests.
     rx, ry = ox - cx, oy - cy
@@ -52,7 +52,7 @@ def _hit_box(ox, oy, dx, dy, cx, cy, cos_yaw, sin_yaw, half_length, half_width):
     return t_near if t_near > _EPS else t_far
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def _hit_segment(ox, oy, dx, dy, x1, y1, x2, y2):
     ex, ey = x2 - x1, y2 - y1
     denom = dx * ey - dy * ex
@@ -65,7 +65,7 @@ def _hit_segment(ox, oy, dx, dy, x1, y1, x2, y2):
     return (wx * ey - wy * ex) / denom
 
 
-@njit(cache=True)
+@kernel
 def _window(ox, oy, cx, cy, radius, a0, delta, n, range_max, bounds):
     """Beam index ranges [lo, hi] (up to three, for wrap-around) that may hit a bounding circle.
     Returns how many ranges were written into ``bounds``; 0 when the circle is out of range."""
@@ -87,7 +87,7 @@ def _window(ox, oy, cx, cy, radius, a0, delta, n, range_max, bounds):
     return count
 
 
-@njit(cache=True)
+@kernel
 def cast_scan(ox, oy, a0, delta, circles, boxes, segments, range_max, out):
     """Fill ``out`` (n beams at world angles a0 + k * delta) with the distance from (ox, oy) to the
     first circle (rows x, y, r), box (rows x, y, cos yaw, sin yaw, half length, half width) or

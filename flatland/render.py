@@ -38,8 +38,10 @@ def _obstacle_patch(obstacle) -> patches.Patch | None:
 class Renderer:
     """Draws one scenario; call :meth:`draw` per step, then :meth:`frame` for pixels."""
 
-    def __init__(self, scenario: Scenario, human: bool = False, size_inches: float = 5.0, dpi: int = 96) -> None:
+    def __init__(self, scenario: Scenario, human: bool = False, size_inches: float = 5.0, dpi: int = 96,
+                 goal_radius: float | None = None) -> None:
         self.scenario = scenario
+        self.goal_radius = scenario.goal_threshold if goal_radius is None else goal_radius
         self.human = human
         if human:
             import matplotlib.pyplot as plt
@@ -82,7 +84,7 @@ class Renderer:
                 pts = np.asarray(obstacle.points)
                 ax.plot(pts[:, 0], pts[:, 1], color="0.1", linewidth=2)
         gx, gy = self.scenario.goal
-        ax.add_patch(patches.Circle((gx, gy), self.scenario.goal_threshold, facecolor="tab:green", alpha=0.4))
+        ax.add_patch(patches.Circle((gx, gy), self.goal_radius, facecolor="tab:green", alpha=0.4))
         ax.plot([gx], [gy], marker="*", color="tab:green", markersize=12)
 
     def draw(self, readings: Readings, trajectory: Sequence[tuple[float, float]] = (), caption: str = "") -> None:
@@ -165,14 +167,16 @@ class RecordedEpisode(NamedTuple):
 
 
 def record_agent(agent, scenario: Scenario, path: str | Path, tier: str = "flatland", seed: int = 0,
-                 max_steps: int | None = None, every: int = 1, conditions: "Conditions | None" = None) -> RecordedEpisode:
+                 max_steps: int | None = None, every: int = 1, conditions: "Conditions | None" = None,
+                 goal_radius: float | None = None) -> RecordedEpisode:
     """Drive one episode of any agent (controller or policy) and write it as a GIF seen from above,
-    keeping every ``every``-th frame; either tier (the 3D one drawn in 2D), under ``conditions``."""
+    keeping every ``every``-th frame; either tier (the 3D one drawn in 2D), under ``conditions``,
+    judged within ``goal_radius`` (default the scenario's)."""
     from common.conditions import Conditions
     from common.evaluation import run_episode
 
     scenario = (conditions or Conditions()).for_tier(tier).scenario(scenario)  # draw the robot that drives
-    renderer = Renderer(scenario)
+    renderer = Renderer(scenario, goal_radius=goal_radius)
     frames, true_path, estimate = [], [], []
 
     def record(readings: Readings) -> None:
@@ -182,7 +186,8 @@ def record_agent(agent, scenario: Scenario, path: str | Path, tier: str = "flatl
             renderer.draw(readings, true_path, caption=f"{agent.name}  t = {readings.time:.1f} s")
             frames.append(renderer.frame())
 
-    episode = run_episode(agent, scenario, tier, seed=seed, max_steps=max_steps, on_step=record, conditions=conditions)
+    episode = run_episode(agent, scenario, tier, seed=seed, max_steps=max_steps, on_step=record, conditions=conditions,
+                          goal_radius=goal_radius)
     return RecordedEpisode(save_gif(frames, path, fps=10 / every), episode, true_path, estimate)
 
 

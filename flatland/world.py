@@ -20,8 +20,9 @@ import numpy as np
 import pymunk
 
 from common.actuation import Actuator, WheelDynamics
+from common.conditions import Conditions
 from common.kinematics import INTEGRATORS, Pose2D, WheelOdometry, wheel_speeds, wrap_angle
-from common.polygons import convex_pieces
+from flatland.polygons import convex_pieces
 from common.readings import Imu, Odometry, Readings, frozen
 from common.geometry import box_corner_table
 from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, SegmentObstacle, WorldSpec
@@ -58,17 +59,18 @@ class World:
 
     ``reset(seed)`` puts the robot at the scenario's start; ``step(v, w)`` applies raw velocities
     (clipped to the robot's limits and acceleration window) for one ``step_time`` and returns a
-    :class:`Readings` snapshot. ``action_delay``, ``motor_scale`` and ``dynamics`` are the
-    actuation conditions of :mod:`common.conditions` (off by default: an ideal robot).
+    :class:`Readings` snapshot. ``conditions`` (:mod:`common.conditions`; flatland's defaults: an
+    ideal robot) may change the robot, its sensors' noise and its actuation; ``world.scenario`` is
+    the scenario as conditioned.
     """
 
-    def __init__(self, scenario: Scenario, seed: int | None = None, action_delay: int | tuple[int, int] = 0,
-                 motor_scale: tuple[float, float] | None = None, dynamics: str = "kinematic") -> None:
-        self.scenario = scenario
+    def __init__(self, scenario: Scenario, seed: int | None = None, conditions: Conditions | None = None) -> None:
+        self.conditions = (conditions or Conditions()).for_tier("flatland")
+        scenario = self.scenario = self.conditions.scenario(scenario)
         self.rng = np.random.default_rng(seed)
         robot = scenario.robot
-        wheels = WheelDynamics(robot.wheel_radius, robot.wheel_base) if dynamics == "first_order" else None
-        self.actuator = Actuator(action_delay, motor_scale, wheels)
+        first_order = self.conditions.dynamics == "first_order"
+        self.actuator = Actuator(WheelDynamics(robot.wheel_radius, robot.wheel_base) if first_order else None)
         self.space = pymunk.Space()
         # Circles and boxes are kept from one scenario to the next and reshaped in place (a new
         # pymunk shape costs ten times more); polygon pieces and segments are rebuilt.
@@ -89,7 +91,7 @@ class World:
             beam_step=self.lidar.beam_step, range_max=scenario.lidar.range_max)
         self._moved = np.empty(8)
         # Seeding a Generator costs more than a noise-free episode's reset: skipped where nothing draws.
-        self._draws = scenario.lidar.noise_std > 0.0 or robot.encoder_noise > 0.0 or self.actuator.draws
+        self._draws = self.conditions.draws(scenario)
         self._dt = scenario.world.step_time
         self._limits = (robot.v_min, robot.v_max, robot.w_low, robot.w_max)
         self._accel = (robot.accel_v * self._dt, robot.accel_w * self._dt)
@@ -101,14 +103,19 @@ class World:
         self.readings: Readings | None = None
 
     def accepts(self, scenario: Scenario) -> bool:
-        """Whether :meth:`load` can take ``scenario``: the same robot, lidar and world rectangle."""
+        """Whether :meth:`load` can take ``scenario``: the same robot, lidar and world rectangle
+        (under this world's conditions)."""
+        return self._fits(self.conditions.scenario(scenario))
+
+    def _fits(self, conditioned: Scenario) -> bool:
         current = self.scenario
-        return scenario.robot == current.robot and scenario.lidar == current.lidar and scenario.world == current.world
+        return conditioned.robot == current.robot and conditioned.lidar == current.lidar and conditioned.world == current.world
 
     def load(self, scenario: Scenario) -> None:
         """Swap in another scenario's obstacles, start and goal, keeping the space, the robot and
         its conditions (much cheaper than a new World); :meth:`reset` starts its first episode."""
-        if not self.accepts(scenario):
+        scenario = self.conditions.scenario(scenario)
+        if not self._fits(scenario):
             raise ValueError("load() takes a scenario with the same robot, lidar and world; build a new World")
         self.scenario = scenario
         self.lidar.place(*self._add_obstacles(scenario))
@@ -213,7 +220,8 @@ class World:
         self.pose = self.scenario.start_pose
         self.velocity = (0.0, 0.0)
         self.steps = 0
-        self.actuator.reset(self.rng)
+        drawn = self.conditions.draw(self.rng)
+        self.actuator.reset(drawn.action_delay, drawn.motor_gain)
         self.odometry.reset(self.pose)
         # As in IR-SIM, contact is judged after a move: a start that overlaps may still drive out.
         self.stopped = False

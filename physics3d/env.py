@@ -74,8 +74,7 @@ class WarehouseNavEnv(NavigationEnv):
     ## Arguments
     ``gymnasium.make("physics3d/WarehouseNav-v0", world="warehouse", observation="lidar43",
     reward="default", render_mode=None, max_steps=500, difficulty=0.5, goal_distance_scale=10.0,
-    template=None, action_mapping="linear", camera=False, control_period=None, resample=False,
-    goal_threshold=None)``
+    template=None, action_mapping="linear", camera=False, resample=False, goal_threshold=None, **conditions)``
 
     * ``world``: a :class:`Scenario`, a list of them, a kind (``open``, ``sparse``, ``cluttered``,
       ``warehouse``, ``trap``), a mix of kinds by weight, or the path of a scenario or IR-SIM
@@ -85,12 +84,13 @@ class WarehouseNavEnv(NavigationEnv):
     * ``difficulty``: 0 to 1, for generator kinds; ``template``: the robot, lidar and world size
       the generator uses (default ``physics3d.robot.TEMPLATE``).
     * ``camera``: add the camera images to the observation (about 10 ms a frame headless).
-    * ``control_period``: seconds per step (default the scenario's ``step_time``, 0.1 s: 24
-      physics sub-steps).
     * ``goal_threshold``: None (each scenario's goal radius), a radius in metres, or ``[low, high]``
       drawn per episode from the env's seed (``info["goal_threshold"]`` at reset).
     * ``resample``: redraw a random IR-SIM world file every episode instead of restoring its
       initial state; ``reset(options={"resample": True})`` redraws once.
+    * ``**conditions``: the knobs of :mod:`common.conditions`, physics3d's defaults (the 3D robot
+      with realistic imperfections) where unset; e.g. ``control_period`` (seconds per step, default
+      the scenario's ``step_time``, 0.1 s: 24 physics sub-steps) or ``heading_source``.
 
     ## Example
     >>> import gymnasium as gym, physics3d
@@ -112,8 +112,7 @@ class WarehouseNavEnv(NavigationEnv):
     def _build_world(self, scenario: Scenario) -> World:
         # One physics client for the env's life: a new scenario is rebuilt in it (and a GUI stays open).
         if self.world is None:
-            return World(scenario, gui=self.render_mode == "human", camera=self.camera,
-                         **self.conditions.world_kwargs("physics3d"))
+            return World(scenario, conditions=self.conditions, gui=self.render_mode == "human", camera=self.camera)
         self.world.load(scenario)
         return self.world
 

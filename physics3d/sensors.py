@@ -117,26 +117,22 @@ def _rotate_into(q: Quaternion, v: Vector) -> tuple[float, float, float]:
 class Imu:
     """An IMU at the base's centre of mass: accelerometer (specific force, so gravity reads +9.81
     m/s² up at rest) and gyroscope, in the body frame, each axis with Gaussian noise; the gyroscope
-    also carries a bias per axis, drawn per episode with spread ``gyro_bias``.
+    also carries a bias per axis, the episode's (:meth:`reset`; drawn by the world's conditions).
 
     The acceleration is the change of the base's velocity over the last control period: what a
     real IMU averaged over that period would report. :meth:`turned` is the gyroscope's yaw rate
     integrated over the period, as IMU drivers integrate their high-rate samples.
     """
 
-    def __init__(self, rng: np.random.Generator, accel_noise: float = 0.0, gyro_noise: float = 0.0,
-                 gyro_bias: float = 0.0) -> None:
+    def __init__(self, rng: np.random.Generator, accel_noise: float = 0.0, gyro_noise: float = 0.0) -> None:
         self.rng = rng
-        self.accel_noise, self.gyro_noise, self.gyro_bias = accel_noise, gyro_noise, gyro_bias
+        self.accel_noise, self.gyro_noise = accel_noise, gyro_noise
         self.bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self._previous: Vector = (0.0, 0.0, 0.0)
 
-    def reset(self, velocity: Vector = (0.0, 0.0, 0.0)) -> None:
-        """Forget the last velocity (the robot starts at rest); draw this episode's gyro bias."""
-        self._previous = velocity
-        if self.gyro_bias > 0.0:
-            x, y, z = self.rng.normal(0.0, self.gyro_bias, 3).tolist()
-            self.bias = (x, y, z)
+    def reset(self, bias: Vector = (0.0, 0.0, 0.0), velocity: Vector = (0.0, 0.0, 0.0)) -> None:
+        """Start an episode with this gyroscope bias per axis (rad/s), forgetting the last velocity."""
+        self.bias, self._previous = bias, velocity
 
     def turned(self, yaw_change: float, dt: float) -> float:
         """The yaw change (rad) the gyroscope measured over a period ``dt`` in which the body turned
@@ -155,6 +151,6 @@ class Imu:
             noise = self.rng.normal(0.0, 1.0, 6).tolist()
             accel = tuple(a + self.accel_noise * n for a, n in zip(accel, noise[:3]))
             gyro = tuple(g + self.gyro_noise * n for g, n in zip(gyro, noise[3:]))
-        if self.gyro_bias > 0.0:
+        if any(self.bias):
             gyro = tuple(g + b for g, b in zip(gyro, self.bias))
         return ImuReading(accel, gyro)

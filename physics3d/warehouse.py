@@ -15,7 +15,7 @@ from typing import NamedTuple, Sequence
 import numpy as np
 import pybullet as p
 
-from common.polygons import convex_pieces
+from flatland.polygons import convex_pieces
 from common.scenario import BoxObstacle, CircleObstacle, Obstacle, PolygonObstacle, Scenario, SegmentObstacle
 
 WALL_HEIGHT = 1.0  # m

@@ -11,13 +11,11 @@ from __future__ import annotations
 import math
 import os
 import sys
-from typing import get_args
-
 import numpy as np
 import pybullet as p
 
 from common.actuation import Actuator
-from common.conditions import TIER_DEFAULTS, HeadingSource
+from common.conditions import Conditions
 from common.kinematics import Pose2D, WheelOdometry, unicycle_exact, wrap_angle
 from common.readings import Odometry, Readings, frozen
 from common.scenario import Scenario
@@ -40,47 +38,34 @@ class World:
 
     Args:
         scenario: the world, robot limits and encoder noise, lidar, start and goal.
-        seed: seeds the lidar, encoder and IMU noise (``reset(seed)`` reseeds).
+        seed: seeds the lidar, encoder and IMU noise and the per-episode draws (``reset(seed)`` reseeds).
+        conditions: the knobs of :mod:`common.conditions`, physics3d's defaults where unset (the
+            3D robot with realistic imperfections): its profile, sensor noise, actuation, wheel
+            friction, mass, control period, IMU noise and where the odometry's heading comes from.
+            Ranges are drawn at every reset from the world's generator. ``world.scenario`` is the
+            scenario as conditioned.
         gui: open PyBullet's GUI instead of the headless DIRECT client (one per process).
-        control_period: seconds per :meth:`step` (default ``scenario.world.step_time``).
         camera: also render the robot's camera into ``Readings.camera`` every step.
-        accel_noise, gyro_noise: standard deviations of the accelerometer's (m/s²) and the
-            gyroscope's (rad/s) noise on each axis.
-        gyro_bias: spread (rad/s) of the gyroscope's bias, drawn per episode.
-        heading_source: where the odometry's heading comes from: ``"wheels"`` (dead reckoning
-            alone) or ``"gyro"`` (the IMU's integrated yaw rate; the wheels give the speed).
-        action_delay, motor_scale, friction, mass_scale: the conditions of :mod:`common.conditions`
-            (none by default here; the env applies physics3d's realistic defaults). Ranges are
-            drawn at every reset from the world's generator.
 
     The URDF robot is always the body that drives; the scenario's robot profile supplies the
     velocity limits and the encoder noise (its acceleration limits are IR-SIM's kinematic
     stand-in for inertia, which this tier simulates, so they are not applied).
     """
 
-    def __init__(self, scenario: Scenario, seed: int | None = None, gui: bool = False,
-                 control_period: float | None = None, camera: bool = False,
-                 accel_noise: float = 0.05, gyro_noise: float = TIER_DEFAULTS["physics3d"]["gyro_noise"],
-                 gyro_bias: float = 0.0,
-                 heading_source: HeadingSource = "wheels",
-                 action_delay: int | tuple[int, int] = 0,
-                 motor_scale: tuple[float, float] | None = None, friction: tuple[float, float] | None = None,
-                 mass_scale: tuple[float, float] | None = None) -> None:
+    def __init__(self, scenario: Scenario, seed: int | None = None, conditions: Conditions | None = None,
+                 gui: bool = False, camera: bool = False) -> None:
         if gui and sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
             # PyBullet's GUI waits forever for a window it cannot open; fail instead.
             raise RuntimeError("the PyBullet GUI needs an X display (DISPLAY is not set); try xvfb-run")
         self.client = p.connect(p.GUI if gui else p.DIRECT)
         self.gui = gui
-        period = scenario.world.step_time if control_period is None else control_period
+        self.conditions = resolved = (conditions or Conditions()).for_tier("physics3d")
+        period = scenario.world.step_time if resolved.control_period is None else resolved.control_period
         self.substeps = max(1, round(period * PHYSICS_HZ))
         self.period = self.substeps / PHYSICS_HZ
         self.rng = np.random.default_rng(seed)
-        if heading_source not in get_args(HeadingSource):
-            raise ValueError(f"heading_source must be one of {get_args(HeadingSource)}, got {heading_source!r}")
-        self.imu_spec = (accel_noise, gyro_noise, gyro_bias)
-        self.gyro_heading = heading_source == "gyro"
-        self.actuator = Actuator(action_delay, motor_scale)
-        self.friction_range, self.mass_range = friction, mass_scale
+        self.gyro_heading = resolved.heading_source == "gyro"
+        self.actuator = Actuator()
         renderer = p.ER_BULLET_HARDWARE_OPENGL if gui else p.ER_TINY_RENDERER
         self.camera = Camera(self.client, renderer=renderer) if camera else None
         self._state: int | None = None
@@ -89,6 +74,7 @@ class World:
     def load(self, scenario: Scenario) -> None:
         """Replace everything with the world of ``scenario``, in the same client (a GUI window stays open)."""
         c = self.client
+        scenario = self.conditions.scenario(scenario)
         if self.gui:
             p.configureDebugVisualizer(p.COV_ENABLE_RENDERING, 0, physicsClientId=c)  # no redraw per body
         if self._state is not None:
@@ -104,7 +90,7 @@ class World:
         self.warehouse: Warehouse = build(scenario, c)
         self.robot = Robot(c, scenario.start_pose)
         self.lidar = Lidar(scenario.lidar, c, self.robot.lidar_height, self.rng, ROBOT_COLLISION_GROUP)
-        self.imu = Imu(self.rng, *self.imu_spec)
+        self.imu = Imu(self.rng, self.conditions.accel_noise, self.conditions.gyro_noise)
         robot = scenario.robot
         self.odometry = WheelOdometry(WHEEL_RADIUS, WHEEL_BASE, robot.encoder_noise, self.rng, unicycle_exact)
         self._limits = (robot.v_min, robot.v_max, robot.w_low, robot.w_max)
@@ -124,16 +110,17 @@ class World:
             self.rng = np.random.default_rng(seed)
             self.lidar.rng = self.imu.rng = self.odometry.rng = self.rng
         p.restoreState(self._state, physicsClientId=self.client)
-        self.actuator.reset(self.rng)
-        if self.friction_range is not None:
-            self.robot.set_friction(float(self.rng.uniform(*self.friction_range)))
-        if self.mass_range is not None:
-            self.robot.set_mass_scale(float(self.rng.uniform(*self.mass_range)))
+        drawn = self.conditions.draw(self.rng)
+        self.actuator.reset(drawn.action_delay, drawn.motor_gain)
+        if drawn.friction is not None:
+            self.robot.set_friction(drawn.friction)
+        if drawn.mass_scale is not None:
+            self.robot.set_mass_scale(drawn.mass_scale)
         self.robot.drive(0.0, 0.0)
         self.steps = 0
         self._angles = self.robot.wheel_angles()
         self.odometry.reset(self.pose())
-        self.imu.reset()
+        self.imu.reset(drawn.gyro_bias)
         self.readings = self._read(0.0, bool(self.touching()))
         return self.readings
 

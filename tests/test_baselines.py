@@ -15,7 +15,7 @@ import pytest
 from common.controllers import CONTROLLERS, make_controller
 from common.evaluation import evaluate
 from common.generators import get_suite
-from common.report import markdown_table
+from common.curriculum.comparison import markdown_table
 
 EPISODES = 20
 FLOORS = {  # (suite, controller): minimum success rate

@@ -9,7 +9,7 @@ import tempfile
 
 import pytest
 
-from common.cli import main
+from common.curriculum.cli import main
 from common.errors import ConfigError
 from common.scenario import Scenario
 
@@ -51,7 +51,7 @@ def test_validate_accepts_a_good_file_and_missing_files_fail(tmp_path, capsys):
 def test_cli_process_exits_2_without_traceback(tmp_path):
     path = tmp_path / "bad.yaml"
     path.write_text("obstacles:\n  - {type: circle, x: 5, y: 5, radius: -1}\n")
-    result = subprocess.run([sys.executable, "-m", "common.cli", "validate", str(path)], capture_output=True, text=True)
+    result = subprocess.run([sys.executable, "-m", "common.curriculum.cli", "validate", str(path)], capture_output=True, text=True)
     assert result.returncode == 2
     assert "Traceback" not in result.stderr and len(result.stderr.strip().splitlines()) == 1
 
@@ -74,7 +74,7 @@ def test_bench_json_has_the_agreed_keys(capsys, monkeypatch, tmp_path):
 
 
 def test_bench_takes_the_faster_of_two_alternated_ppo_runs_of_each_setting(monkeypatch):
-    from common import bench
+    from common.curriculum import bench
 
     measured = iter([(100.0, 0.5), (80.0, 0.6), (60.0, 0.1), (120.0, 0.7), (70.0, 0.8), (90.0, 0.9)])
     order = []
@@ -109,7 +109,7 @@ def test_bench_gui_without_a_display_says_how_to_run_it(monkeypatch, capsys):
     (["fly"], "invalid choice: 'fly'"),
 ])
 def test_bad_flags_and_missing_files_are_one_line_exit_2(argv, expected):
-    result = subprocess.run([sys.executable, "-m", "common.cli", *argv], capture_output=True, text=True)
+    result = subprocess.run([sys.executable, "-m", "common.curriculum.cli", *argv], capture_output=True, text=True)
     assert result.returncode == 2, result.stderr
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and expected in lines[0] and "Traceback" not in result.stderr, result.stderr
@@ -143,20 +143,23 @@ def test_compare_reads_an_irsim_world_file(tmp_path, capsys):
 def test_render_writes_a_gif_and_the_drift_plot(tmp_path, capsys):
     gif, drift = tmp_path / "e.gif", tmp_path / "d.png"
     assert main(["render", "--suite", "sparse", "--agent", "astar_pursuit", "--out", str(gif), "--every", "5",
-                 "--drift", str(drift), "--encoder-noise", "0.05"]) == 0
+                 "--drift", str(drift), "--env-kwargs", "odometry_noise:0.05"]) == 0
     from PIL import Image
 
     with Image.open(gif) as image:
         assert image.n_frames > 3
-    assert drift.stat().st_size > 1000 and "odometry drift" in capsys.readouterr().out
+    printed = capsys.readouterr()
+    assert drift.stat().st_size > 1000 and "(encoder noise 0.05)" in printed.out
+    assert "astar_pursuit: flatland, suite sparse, 1 episodes from seed 0, judged within each scenario's goal radius; " \
+           "conditions: odometry_noise=0.05, action_delay=0, dynamics=kinematic" in printed.err
 
 
 @pytest.mark.parametrize("argv, expected", [
     (["render", "--index", "-1"], "argument --index: must be from 0"),
     (["eval", "--policy", "p.zip", "--seed", "-1"], "argument --seed: must be from 0"),
     (["bench", "--steps", "0"], "argument --steps: must be from 100"),
-    (["render", "--encoder-noise", "nan"], "argument --encoder-noise: must be a number from 0 to 1, got nan"),
-    (["render", "--encoder-noise", "-1"], "argument --encoder-noise: must be a number from 0 to 1"),
+    (["render", "--env-kwargs", "odometry_noise:nan"], "--env-kwargs.odometry_noise: Input should be a finite number"),
+    (["render", "--env-kwargs", "odometry_noise:-1"], "--env-kwargs.odometry_noise: Input should be greater than or equal to 0"),
     (["render", "--episodes", "3"], "unrecognized arguments: --episodes 3"),
     (["compare", "--controllers", ",,,"], "--controllers: no controller named in ',,,'"),
     (["compare", "--max-steps", "0"], "argument --max-steps: must be from 1"),
@@ -222,7 +225,7 @@ def test_controllers_and_policies_arrive_on_an_irsim_world_with_its_default_goal
 def test_a_policys_conditions_are_evaluated_by_default_and_the_command_line_overrides(untrained_policy, tmp_path):
     import shutil
 
-    from common.cli import _conditions, build_parser
+    from common.curriculum.cli import _conditions, _settle, build_parser
     from common.curriculum.policy import load_policy
     from common.curriculum.policy_file import update_manifest
 
@@ -233,7 +236,9 @@ def test_a_policys_conditions_are_evaluated_by_default_and_the_command_line_over
     agent = load_policy(path)
 
     def conditions(*flags: str):
-        return _conditions(build_parser().parse_args(["eval", "--policy", str(path), *flags]), [agent])
+        args = build_parser().parse_args(["eval", "--policy", str(path), *flags])
+        _settle(args, [agent])
+        return _conditions(args, [agent])
 
     assert conditions().model_dump(exclude_none=True) == {"robot": "physics3d", "lidar_noise": 0.2, "action_delay": 0,
                                                            "dynamics": "first_order"}
@@ -243,14 +248,15 @@ def test_a_policys_conditions_are_evaluated_by_default_and_the_command_line_over
     in_3d = conditions("--world", "physics3d")
     assert in_3d.dynamics is None and in_3d.lidar_noise == 0.2 and in_3d.friction == (0.8, 1.2)  # 2D-only knob dropped
     with pytest.raises(ConfigError, match="--policy: these policies trained under different conditions"):
-        _conditions(build_parser().parse_args(["compare", "--policy", str(path), str(untrained_policy)]),
-                    [agent, load_policy(untrained_policy)])
+        args = build_parser().parse_args(["compare", "--policy", str(path), str(untrained_policy)])
+        _settle(args, [agent])
+        _conditions(args, [agent, load_policy(untrained_policy)])
 
 
 def test_a_policy_is_judged_within_the_goal_radius_it_trained_for(untrained_policy, tmp_path):
     import shutil
 
-    from common.cli import _judged, _scenarios, build_parser
+    from common.curriculum.cli import _judged, build_parser
     from common.controllers import make_controller
     from common.curriculum.policy import load_policy
     from common.curriculum.policy_file import update_manifest
@@ -260,12 +266,11 @@ def test_a_policy_is_judged_within_the_goal_radius_it_trained_for(untrained_poli
     update_manifest(path, {"env_kwargs": {"goal_threshold": [0.1, 0.5]}})
     precise, plain = load_policy(path), load_policy(untrained_policy)
 
-    def radii(*flags: str, agents=(precise,)):
-        args = build_parser().parse_args(["compare", "--episodes", "3", *flags])
-        return {s.goal_threshold for s in _judged(args, _scenarios(args), list(agents))}
+    def radius(*flags: str, agents=(precise,)):
+        return _judged(build_parser().parse_args(["compare", "--episodes", "3", *flags]), list(agents))
 
-    assert radii() == {0.1}  # the smallest radius it trained for
-    assert radii("--goal-threshold", "0.4") == {0.4}
-    assert radii(agents=(plain, make_controller("pid_blend"))) == {0.3}  # the suite's own
+    assert radius() == 0.1  # the smallest radius it trained for
+    assert radius("--goal-threshold", "0.4") == 0.4
+    assert radius(agents=(plain, make_controller("pid_blend"))) is None  # each scenario's own
     with pytest.raises(ConfigError, match="trained for different goal radii"):
-        radii(agents=(precise, plain))
+        radius(agents=(precise, plain))

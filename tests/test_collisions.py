@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
+from common.conditions import Conditions
 from common.kinematics import Pose2D, wrap_angle
 from common.readings import Readings
 from common.scenario import (
@@ -382,7 +383,7 @@ def test_a_motor_gain_above_one_cannot_lift_the_acceleration_window_past_the_lim
     # end then lies above v_max: the limit wins, so the command stays 1 m/s and the robot 1.2 m/s.
     scenario = Scenario(world=WorldSpec(width=40.0, height=40.0, step_time=DT), lidar=LidarSpec(beams=8),
                         robot=RobotProfile(v_max=1.0, accel_v=0.5), start=(1.0, 20.0, 0.0))
-    world = World(scenario, motor_scale=(1.2, 1.2))
+    world = World(scenario, conditions=Conditions(motor_scale=(1.2, 1.2)))
     world.reset(seed=0)
     speeds = [world.step(1.0, 0.0).velocity[0] for _ in range(40)]
     assert speeds[-1] == pytest.approx(1.2) and max(speeds) == pytest.approx(1.2)

@@ -111,8 +111,13 @@ def test_physics3d_defaults_are_the_realistic_ones():
     assert conditions.robot == "physics3d" and conditions.lidar_noise == 0.01 and conditions.odometry_noise == 0.01
     assert conditions.motor_scale == (0.95, 1.05) and conditions.friction == (0.8, 1.2) and conditions.mass_scale == (0.9, 1.1)
     world = env.unwrapped.world
-    assert world.gyro_heading and world.imu.gyro_noise == 0.005 and world.imu.gyro_bias == 0.0005
+    assert world.gyro_heading and world.imu.gyro_noise == 0.005 and world.conditions.gyro_bias == 0.0005
     assert gym.make("flatland/Nav-v0").unwrapped.conditions.lidar_noise is None  # flatland: ideal unless asked
+    # A world built directly has its tier's defaults too: there is one table of them.
+    bare = make_world("physics3d", OPEN)
+    assert bare.conditions == conditions and bare.gyro_heading and bare.imu.accel_noise == 0.05
+    assert bare.scenario.lidar.noise_std == 0.01 and bare.scenario.robot.encoder_noise == 0.01
+    bare.close()
     env.close()
 
 
@@ -142,7 +147,9 @@ def test_a_heavier_slipperier_3d_robot_accelerates_less():
 def test_the_heading_and_gyro_knobs_reach_the_3d_world():
     env = gym.make("physics3d/WarehouseNav-v0", world="open", heading_source="wheels", gyro_noise=0.02, gyro_bias=0.01)
     world = env.unwrapped.world
-    assert not world.gyro_heading and world.imu.gyro_noise == 0.02 and world.imu.gyro_bias == 0.01
+    assert not world.gyro_heading and world.imu.gyro_noise == 0.02 and world.conditions.gyro_bias == 0.01
+    biases = {world.reset(seed=seed).imu and world.imu.bias for seed in range(3)}
+    assert len(biases) == 3 and all(abs(b) < 0.1 for bias in biases for b in bias)  # drawn per episode, σ 0.01
     env.close()
 
 

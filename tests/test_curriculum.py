@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import yaml
 
-from common.cli import main
+from common.curriculum.cli import main
 from common.curriculum.schema import curriculum_from_mapping, load_curriculum
 from common.errors import ConfigError
 
@@ -73,7 +73,7 @@ def _shape(root: Path) -> set[str]:
 
 
 def _run(out: Path, *extra: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "common.cli", "run", str(TINY), "--out", str(out), *extra],
+    return subprocess.Popen([sys.executable, "-m", "common.curriculum.cli", "run", str(TINY), "--out", str(out), *extra],
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
 
@@ -356,8 +356,8 @@ def test_a_transfer_curriculum_writes_its_evidence(tmp_path, capsys, monkeypatch
 
 
 def test_a_stage_is_evaluated_within_its_own_goal_radius():
-    from common.curriculum.runner import stage_scenarios
+    from common.curriculum.stage import stage_radius
 
     config = curriculum_from_mapping(_with({}, {"env_kwargs": {"goal_threshold": [0.12, 0.5]}}), "c.yaml")
-    assert {s.goal_threshold for s in stage_scenarios(config.stages[0], 4, 0)} == {0.12}
-    assert {s.goal_threshold for s in stage_scenarios(config.stages[1], 4, 0)} == {0.3}  # the suite's own
+    assert stage_radius(config.stages[0]) == 0.12
+    assert stage_radius(config.stages[1]) is None  # each scenario's own

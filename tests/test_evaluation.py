@@ -8,7 +8,7 @@ import pytest
 
 from common.evaluation import Episode, evaluate, run_episode, shortest_path_length, summarise, wilson_interval
 from common.kinematics import wrap_angle
-from common.report import bar_chart, markdown_table, write_csv
+from common.curriculum.comparison import bar_chart, markdown_table, write_csv
 from common.scenario import CircleObstacle, Scenario
 
 

@@ -21,7 +21,7 @@ import yaml
 
 import flatland  # noqa: F401
 import physics3d  # noqa: F401
-from common.cli import main
+from common.curriculum.cli import main
 from common.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -105,7 +105,7 @@ def test_every_entry_point_refuses_a_bad_world_in_one_line(tmp_path):
         flatland.load_world(path)
     with pytest.raises(ConfigError):
         read_world_file(path, seed=3)
-    result = subprocess.run([sys.executable, "-m", "common.cli", "compare", "--scenario-file", str(path), "--episodes", "1",
+    result = subprocess.run([sys.executable, "-m", "common.curriculum.cli", "compare", "--scenario-file", str(path), "--episodes", "1",
                              "--controllers", "go_to_goal", "--out", str(tmp_path / "o")], capture_output=True, text=True)
     assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1 and "Traceback" not in result.stderr
 

@@ -19,9 +19,11 @@ from gymnasium.utils.env_checker import check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import physics3d  # noqa: F401  (registers the env)
-from common.bench import bare_pybullet_steps_per_s, camera_fps, physics3d_bench_scenario, physics3d_steps_per_s
-from common.cli import main
+from common.curriculum.bench import bare_pybullet_steps_per_s, camera_fps, physics3d_bench_scenario, physics3d_steps_per_s
+from common.curriculum.cli import main
+from common.conditions import Conditions
 from common.controllers import make_controller
+from common.errors import ConfigError
 from common.curriculum.policy_file import save_policy
 from common.evaluation import run_episode
 from common.generators import generate
@@ -37,6 +39,14 @@ from physics3d.sensors import GRAVITY, Lidar
 from physics3d.world import World
 
 OPEN = TEMPLATE.model_copy(update={"start": (5.0, 5.0, 0.0), "goal": (9.0, 9.0)})
+# The robot as built: no sensor noise and none of physics3d's per-episode imperfections. The tests
+# of the world's physics and sensors start from it and add the one knob they measure.
+AS_BUILT = dict(lidar_noise=0.0, odometry_noise=0.0, motor_scale=(1.0, 1.0), friction=(1.0, 1.0),
+                mass_scale=(1.0, 1.0), heading_source="wheels", gyro_noise=0.0, gyro_bias=0.0, accel_noise=0.0)
+
+
+def as_built(**knobs) -> Conditions:
+    return Conditions(**{**AS_BUILT, **knobs})
 
 
 def scenario(**update) -> Scenario:
@@ -69,7 +79,7 @@ def test_urdf_loads_with_the_tutorials_dimensions():
 
 @pytest.mark.parametrize("v, w", [(0.5, 0.0), (0.3, 0.5), (0.2, 1.5), (0.0, -1.5), (0.5, 1.5)])
 def test_wheels_track_the_commanded_velocity_within_five_percent(v, w):
-    world = World(OPEN)
+    world = World(OPEN, conditions=as_built())
     world.reset(seed=0)
     for _ in range(10):  # accelerate
         world.step(v, w)
@@ -79,7 +89,7 @@ def test_wheels_track_the_commanded_velocity_within_five_percent(v, w):
 
 
 def test_commands_are_clipped_to_the_profile_limits():
-    world = World(OPEN)
+    world = World(OPEN, conditions=as_built())
     world.reset()
     for _ in range(15):
         readings = world.step(3.0, -9.0)
@@ -114,7 +124,7 @@ BOXES = [BoxObstacle(x=7.0, y=5.2, length=0.6, width=1.5), BoxObstacle(x=4.0, y=
 def test_lidar_ranges_match_analytic_distances_to_placed_boxes(yaw, offset):
     lidar = LidarSpec(beams=36, range_max=5.0, offset=offset)
     unwalled = OPEN.world.model_copy(update={"walls": False})
-    world = World(scenario(obstacles=BOXES, lidar=lidar, start=(5.0, 5.0, yaw), world=unwalled))
+    world = World(scenario(obstacles=BOXES, lidar=lidar, start=(5.0, 5.0, yaw), world=unwalled), conditions=as_built())
     readings = world.reset()
     x, y, heading = readings.pose
     c, s = math.cos(heading), math.sin(heading)
@@ -127,7 +137,7 @@ def test_lidar_ranges_match_analytic_distances_to_placed_boxes(yaw, offset):
 
 
 def test_lidar_skips_the_robots_own_links_and_clips_with_noise():
-    world = World(scenario(obstacles=BOXES[:1]))
+    world = World(scenario(obstacles=BOXES[:1]), conditions=as_built())
     world.reset()
     spec = LidarSpec(beams=36, range_min=0.3, range_max=2.5, noise_std=0.05)
     # A scan plane through the middle of the body: every ray starts inside the robot's links.
@@ -142,7 +152,7 @@ def test_lidar_skips_the_robots_own_links_and_clips_with_noise():
 
 def test_lidar_noise_has_the_specified_spread():
     spec = LidarSpec(beams=36, range_max=5.0, noise_std=0.02)
-    quiet, noisy = (World(scenario(obstacles=BOXES, lidar=spec.model_copy(update={"noise_std": n}))) for n in (0.0, 0.02))
+    quiet, noisy = (World(scenario(obstacles=BOXES, lidar=spec), conditions=as_built(lidar_noise=n)) for n in (0.0, 0.02))
     truth = quiet.reset().lidar
     errors = np.concatenate([noisy.reset(seed=k).lidar - truth for k in range(20)])
     errors = errors[np.abs(errors) > 0]
@@ -154,7 +164,7 @@ def test_lidar_noise_has_the_specified_spread():
 
 def test_camera_images_have_their_shapes_and_depth_in_metres():
     box = BoxObstacle(x=6.0, y=5.0, length=0.5, width=3.0, height=1.5)  # near face 0.75 m ahead of the centre
-    world = World(scenario(obstacles=[box]), camera=True)
+    world = World(scenario(obstacles=[box]), conditions=as_built(), camera=True)
     camera = world.reset().camera
     rgb, depth, segmentation = camera["rgb"], camera["depth"], camera["segmentation"]
     assert rgb.shape == (240, 320, 3) and rgb.dtype == np.uint8
@@ -171,7 +181,7 @@ def test_camera_images_have_their_shapes_and_depth_in_metres():
 
 
 def test_imu_reads_gravity_at_rest_with_the_specified_noise():
-    world = World(OPEN, seed=0, accel_noise=0.1, gyro_noise=0.02)
+    world = World(OPEN, seed=0, conditions=as_built(accel_noise=0.1, gyro_noise=0.02))
     world.reset(seed=0)
     imu = [world.step(0.0, 0.0).imu for _ in range(300)]
     accel = np.array([r.linear_acceleration for r in imu])
@@ -183,7 +193,7 @@ def test_imu_reads_gravity_at_rest_with_the_specified_noise():
 
 
 def test_imu_measures_turn_rate_and_centripetal_acceleration():
-    world = World(OPEN, accel_noise=0.0, gyro_noise=0.0)
+    world = World(OPEN, conditions=as_built())
     world.reset()
     for _ in range(15):
         world.step(0.4, 1.0)
@@ -199,7 +209,7 @@ def test_imu_measures_turn_rate_and_centripetal_acceleration():
 
 def _curving_drive(encoder_noise: float, seed: int, **world) -> list:
     """The readings of 4.8 m of curving drive on an empty floor."""
-    world = World(scenario(robot=ROBOT_PROFILE.model_copy(update={"encoder_noise": encoder_noise})), **world)
+    world = World(OPEN, conditions=as_built(odometry_noise=encoder_noise, **world))
     readings = [world.reset(seed=seed)]
     readings += [world.step(0.4, 0.6 * math.sin(0.05 * k)) for k in range(120)]
     world.close()
@@ -241,7 +251,7 @@ def test_the_heading_source_changes_no_other_draw():
 
 
 def test_the_gyro_bias_is_drawn_per_episode_and_turns_the_estimate_at_rest():
-    world = World(OPEN, gyro_noise=0.0, gyro_bias=0.05, heading_source="gyro")
+    world = World(OPEN, conditions=as_built(gyro_bias=0.05, heading_source="gyro"))
 
     def drift(seed: int) -> tuple[float, float]:
         start = world.reset(seed=seed).odometry.pose.yaw
@@ -257,8 +267,8 @@ def test_the_gyro_bias_is_drawn_per_episode_and_turns_the_estimate_at_rest():
 
 
 def test_an_unknown_heading_source_is_refused():
-    with pytest.raises(ValueError, match="heading_source must be one of"):
-        World(OPEN, heading_source="compass")
+    with pytest.raises(ConfigError, match="heading_source: Input should be 'wheels' or 'gyro'"):
+        World(OPEN, conditions=Conditions.parse({"heading_source": "compass"}))
 
 
 def test_a_graze_that_separates_within_the_control_period_is_a_collision():
@@ -266,7 +276,7 @@ def test_a_graze_that_separates_within_the_control_period_is_a_collision():
     clear again before the period ends: a contact at any of the 48 sub-steps counts."""
     scenario = TEMPLATE.model_copy(update={"start": (1.0, 5.0, 0.0), "goal": (9.0, 5.0),
                                            "obstacles": [CircleObstacle(x=1.5, y=5.19, radius=0.1)]})
-    world = World(scenario, control_period=0.2)
+    world = World(scenario, conditions=as_built(control_period=0.2))
     collided = [world.step(0.5, 0.0).collided for _ in range(4)]
     assert collided == [False, False, False, True]
     assert world.touching() == []  # separated by the period's end: its last sub-step alone says "clear"
@@ -274,7 +284,7 @@ def test_a_graze_that_separates_within_the_control_period_is_a_collision():
 
 def test_driving_into_a_box_is_a_collision_and_the_floor_is_not():
     box = BoxObstacle(x=7.0, y=5.0, length=1.0, width=1.0)
-    world = World(scenario(obstacles=[box]))
+    world = World(scenario(obstacles=[box]), conditions=as_built())
     world.reset()
     for step in range(60):
         readings = world.step(0.5, 0.0)
@@ -287,7 +297,7 @@ def test_driving_into_a_box_is_a_collision_and_the_floor_is_not():
 
 
 def test_walls_bound_the_world():
-    world = World(scenario(start=(9.0, 5.0, 0.0), goal=(1.0, 1.0)))
+    world = World(scenario(start=(9.0, 5.0, 0.0), goal=(1.0, 1.0)), conditions=as_built())
     world.reset()
     collided = [world.step(0.5, 0.0).collided for _ in range(30)]
     assert any(collided) and world.warehouse.tags[world.touching()[0]].kind == "wall"
@@ -308,7 +318,7 @@ MIXED = scenario(
 
 @pytest.mark.parametrize("twin", [MIXED, generate("warehouse", 0, 1.0, "eval", TEMPLATE)], ids=["mixed", "warehouse"])
 def test_the_same_scenario_gives_matching_lidar_scans_in_both_tiers(twin):
-    world = World(twin)
+    world = World(twin, conditions=as_built())
     rng = np.random.default_rng(0)
     poses = [twin.start]
     while len(poses) < 4:  # free poses: clear of every obstacle by the robot's radius
@@ -367,7 +377,7 @@ def test_every_obstacle_is_built_to_its_height_and_tagged():
 # --- world API, tiers and evaluation -----------------------------------------------------------
 
 def test_control_period_sets_the_substeps_and_time():
-    world = World(OPEN, control_period=0.05)
+    world = World(OPEN, conditions=Conditions(control_period=0.05))
     world.reset()
     assert world.substeps == 12
     assert world.step(0.3, 0.0).time == pytest.approx(0.05)
@@ -375,9 +385,8 @@ def test_control_period_sets_the_substeps_and_time():
 
 
 def test_reset_restores_the_start_and_same_seed_replays_the_world():
-    noisy = scenario(lidar=LidarSpec(noise_std=0.05), robot=ROBOT_PROFILE.model_copy(update={"encoder_noise": 0.05}),
-                     obstacles=BOXES)
-    world = World(noisy)
+    noisy = scenario(obstacles=BOXES)
+    world = World(noisy, conditions=Conditions(lidar_noise=0.05, odometry_noise=0.05))
 
     def episode(seed: int) -> list:
         out = [world.reset(seed=seed)]

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from common.cli import main
-from common.curriculum.sweep import aggregate
+from common.curriculum.cli import main
+from common.statistics import aggregate
 
 pytest.importorskip("ray")
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,7 +39,7 @@ def test_the_aggregate_is_the_interquartile_mean_with_a_bootstrap_interval():
 
 def test_an_unreachable_cluster_is_a_one_line_error_within_seconds(tmp_path):
     began = time.perf_counter()
-    result = subprocess.run([sys.executable, "-m", "common.cli", "sweep", str(TINY), "--address", "127.0.0.1:9",
+    result = subprocess.run([sys.executable, "-m", "common.curriculum.cli", "sweep", str(TINY), "--address", "127.0.0.1:9",
                              "--out", str(tmp_path / "s")], capture_output=True, text=True, timeout=60)
     assert result.returncode == 2 and "--address: no Ray cluster answers at 127.0.0.1:9" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1 and time.perf_counter() - began < 30
@@ -108,7 +108,7 @@ def test_an_interrupted_sweep_continues_with_resume(tmp_path):
     longer.write_text(TINY.read_text().replace("budget: 512", "budget: 4096").replace("every: 128", "every: 512"))
     assert "budget: 4096" in longer.read_text() and "every: 512" in longer.read_text()
     out = tmp_path / "sweep"
-    driver = subprocess.Popen([sys.executable, "-m", "common.cli", "sweep", str(longer), "--seeds", "2", "--out", str(out)],
+    driver = subprocess.Popen([sys.executable, "-m", "common.curriculum.cli", "sweep", str(longer), "--seeds", "2", "--out", str(out)],
                               cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     deadline = time.time() + 240
     while time.time() < deadline and not list(out.glob("trials/*/eval.csv")):
@@ -120,7 +120,7 @@ def test_an_interrupted_sweep_continues_with_resume(tmp_path):
     driver.wait()
     assert not (out / "sweep.json").exists()
     before = {run.name: _eval_steps(run) for run in (out / "trials").iterdir() if (run / "eval.csv").exists()}
-    resumed = subprocess.run([sys.executable, "-m", "common.cli", "sweep", str(longer), "--seeds", "2", "--out", str(out),
+    resumed = subprocess.run([sys.executable, "-m", "common.curriculum.cli", "sweep", str(longer), "--seeds", "2", "--out", str(out),
                               "--resume"], cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert resumed.returncode == 0, resumed.stderr[-2000:]
     assert [t["status"] for t in _trials(out)] == ["done", "done"]

@@ -25,16 +25,29 @@ import csv
 import json
 import statistics
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from common.curriculum.policy_file import update_manifest
-from common.curriculum.schema import CurriculumConfig
+from common.curriculum.run_directory import StagePaths
+from common.curriculum.schema import CurriculumConfig, StageSpec
+from common.evaluation import Summary
 
-if TYPE_CHECKING:
-    from common.curriculum.runner import Runner
+
+class EvidenceHost(Protocol):
+    """What gathering evidence needs of the run whose last stage it judges (a
+    :class:`~common.curriculum.runner.Runner`)."""
+
+    config: CurriculumConfig
+    out: Path
+
+    def arm(self, config: CurriculumConfig, out: Path, resume: bool) -> "EvidenceHost": ...
+
+    def run(self) -> dict: ...
+
+    def evaluate_policy(self, stage: StageSpec, policy: Path, test: bool = True) -> Summary: ...
 
 SEED_STRIDE = 1000
 TARGET = 0.9  # validation success whose first crossing counts as "reached"
@@ -76,17 +89,15 @@ def _spread(values: list[float]) -> float:
     return statistics.pstdev(values) if len(values) > 1 else 0.0
 
 
-def gather_evidence(runner: Runner, state: dict) -> dict[str, Any]:
+def gather_evidence(runner: EvidenceHost, state: dict) -> dict[str, Any]:
     """Run the missing arms (resuming any that were interrupted) and write the evidence."""
-    from common.curriculum.runner import Runner, StagePaths
-
     config, out = runner.config, runner.out
     last, previous = config.stages[-1], config.stages[-2]
     runs = {"transfer": [(config.seed, out)], "scratch": []}
     for name, arm in arm_configs(config).items():
         directory = out / "evidence" / name
         resume = (directory / "state.json").exists()
-        Runner(arm, directory, resume=resume, device=runner.device, progress=False).run()
+        runner.arm(arm, directory, resume).run()
         runs["scratch" if name.startswith("scratch") else "transfer"].append((arm.seed, directory))
     per_seed: dict[str, list[dict[str, Any]]] = {"transfer": [], "scratch": []}
     for arm, members in runs.items():
@@ -98,7 +109,7 @@ def gather_evidence(runner: Runner, state: dict) -> dict[str, Any]:
                    "test_success": final["success_rate"], "steps_to_90": steps_to(curve), "curve": curve,
                    "wall_seconds": json.loads((run / "state.json").read_text())["stages"][last.name]["wall_seconds"]}
             if arm == "transfer":
-                before = StagePaths(run / "stages" / f"{len(config.stages) - 2}-{previous.name}").policy
+                before = StagePaths.of(run, len(config.stages) - 2, previous.name).policy
                 row["zero_shot_test"] = runner.evaluate_policy(last, before).success_rate
                 row["zero_shot_validation"] = runner.evaluate_policy(last, before, test=False).success_rate
                 row["curve"] = [(0, row["zero_shot_validation"]), *curve]

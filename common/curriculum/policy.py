@@ -76,11 +76,12 @@ class PolicyAgent:
 
     def __init__(self, model, observation: str, goal_distance_scale: float, normalizer: Normalizer | None = None,
                  name: str = "policy", action_mapping: str = "linear", max_steps: int | None = None,
-                 env_kwargs: dict | None = None) -> None:
+                 env_kwargs: dict | None = None, home: tuple[str, str, int, int] | None = None) -> None:
         self.model, self.observation, self.goal_distance_scale = model, observation, goal_distance_scale
         self.normalizer, self.name, self.action_mapping = normalizer, name, action_mapping
         self.max_steps = max_steps
         self.env_kwargs = dict(env_kwargs or {})  # what it trained with: its conditions are evaluated by default
+        self.home = home  # (tier, suite, first seed, episodes) of its own test figure: its evaluation by default
 
     def bind(self, robot: RobotProfile, lidar: LidarSpec, goal_threshold: float = 0.3) -> None:
         self.layout: ObservationLayout = make_layout(self.observation, robot, lidar, self.goal_distance_scale)
@@ -115,7 +116,7 @@ def load_policy(path: str | Path, device: str = "cpu", name: str | None = None) 
         name = f"{extra['curriculum']}/{extra['stage']}" if generic else stem
     return PolicyAgent(policy, manifest.observation, manifest.goal_distance_scale, normalizer, name=str(name),
                        action_mapping=manifest.action_mapping, max_steps=manifest.max_steps,
-                       env_kwargs=manifest.env_kwargs)
+                       env_kwargs=manifest.env_kwargs, home=manifest.home)
 
 
 def load_weights(model, path: str | Path, policy_only: bool) -> PolicyFile | None:
@@ -136,9 +137,12 @@ def load_weights(model, path: str | Path, policy_only: bool) -> PolicyFile | Non
             _load_module(target, state, file, name, what)
         else:
             try:
-                target.load_state_dict(state)  # optimisers: the state is checked against the parameters
+                target.load_state_dict(state)  # optimisers: the parameter counts are checked, not the shapes
+                fits = _optimizer_state_fits(target)
             except (RuntimeError, TypeError, ValueError, KeyError, IndexError):
-                raise ConfigError(file.path, f"{name}.pth", f"the optimiser state does not fit {what}; refused") from None
+                fits = False
+            if not fits:
+                raise ConfigError(file.path, f"{name}.pth", f"the optimiser state does not fit {what}; refused")
     if policy_only:
         return file if file.manifest is not None else None
     saved = file.tensors(f"{VARIABLES}.pth", model.device) if variables else {}
@@ -151,6 +155,19 @@ def load_weights(model, path: str | Path, policy_only: bool) -> PolicyFile | Non
     model.num_timesteps = file.manifest.timesteps
     model._n_updates = file.manifest.n_updates
     return file
+
+
+def _optimizer_state_fits(optimizer) -> bool:
+    """Whether each per-parameter tensor of a loaded optimiser state (Adam's moments, say) has its
+    parameter's shape: torch's ``load_state_dict`` takes any shape, and the first update after a
+    resume would then fail deep inside training."""
+    for group in optimizer.param_groups:
+        for parameter in group["params"]:
+            for value in optimizer.state.get(parameter, {}).values():
+                # Scalars (Adam's step count) belong to no parameter's shape.
+                if hasattr(value, "shape") and value.dim() > 0 and value.shape != parameter.shape:
+                    return False
+    return True
 
 
 def _attribute(model, dotted: str):

@@ -60,6 +60,20 @@ class Manifest(BaseModel):
     n_updates: Annotated[int, Field(ge=0)] = 0
     env_kwargs: dict[str, Any] = {}
 
+    @property
+    def home(self) -> tuple[str, str, int, int] | None:
+        """(tier, suite, first seed, episodes) of the policy's own test figure (``final_eval``), if valid."""
+        from common.generators import SUITES
+        from common.tiers import TIERS
+
+        final, tier = getattr(self, "final_eval", None), getattr(self, "tier", "flatland")
+        if not isinstance(final, dict) or tier not in TIERS:
+            return None
+        suite, seed, episodes = final.get("suite"), final.get("first_seed"), final.get("episodes")
+        whole = all(isinstance(n, int) and not isinstance(n, bool) for n in (seed, episodes))
+        valid = suite in SUITES and whole and 0 <= seed < 2**32 and 1 <= episodes <= 1_000_000
+        return (tier, suite, seed, episodes) if valid else None
+
     @field_validator("env_kwargs")
     @classmethod
     def _valid_conditions(cls, value: dict[str, Any]) -> dict[str, Any]:

@@ -1,19 +1,7 @@
 """Run a curriculum stage by stage: train, evaluate on held-out scenarios, checkpoint, promote, resume.
 
-Run directory::
-
-    OUT/config.yaml          the resolved, validated curriculum
-    OUT/run.json             package version, git commit, seeds, devices, start time
-    OUT/state.json           curriculum position (which stages are done), rewritten atomically
-    OUT/eval.csv             every periodic evaluation of every stage
-    OUT/report.md            the final evaluation table per stage, figures, throughput
-    OUT/learning_curve.png   success rate and SPL against timesteps
-    OUT/stages/I-NAME/       checkpoints/last.zip (+ last_replay.npz), best.zip, policy.zip, tensorboard/
-    OUT/.lock                held while a run works in the directory
-
-Periodic evaluations use the eval suite's *validation* draw (suite seeds from 0); the report's final
-evaluation uses a *test* draw (suite seeds from :data:`TEST_SEED_SHIFT`) of the same suite. Both
-are the eval split, disjoint from the training scenarios, and the test draw never chose a checkpoint.
+The run directory's files are :mod:`common.curriculum.run_directory`'s; the evaluation draws
+:mod:`common.curriculum.stage`'s.
 
 A run holds ``OUT/.lock`` (an OS file lock, released when the process ends, even by ``kill -9``),
 so a second run or resume of the same directory is refused instead of interleaving with it. A
@@ -23,13 +11,10 @@ command (or ``--resume``) starts it afresh.
 
 from __future__ import annotations
 
-import csv
 import json
 import platform
-import shutil
 import subprocess
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
@@ -38,26 +23,19 @@ from filelock import FileLock, Timeout
 
 import common
 from common.atomic import atomic_write
+from common.conditions import conditions_of
+from common.curriculum.comparison import write_csv
 from common.curriculum.hyperparams import resolve_hyperparams
 from common.curriculum.policy import PolicyAgent, algorithm_class, load_weights, vec_env_class
 from common.curriculum.policy_file import Normalizer, update_manifest
 from common.curriculum.replay import load_replay
-from common.conditions import conditions_of
+from common.curriculum.run_directory import LOCK_NAME, EvalLog, StagePaths, clear_unstarted, unstarted, write_json
 from common.curriculum.schema import CurriculumConfig, StageSpec
+from common.curriculum.stage import TEST_SEED_SHIFT, stage_radius, stage_scenarios
 from common.errors import ConfigError
 from common.evaluation import Summary, evaluate
-from common.generators import get_suite
-from common.nav_env import judged_radius, with_radius
 from common.observations import DEFAULT_GOAL_DISTANCE_SCALE
-from common.report import write_csv
-from common.scenario import RobotProfile, Scenario
 from common.yaml_io import read_yaml
-
-TEST_SEED_SHIFT = 100_000
-LOCK_NAME = ".lock"
-_PREPARED = {"config.yaml", "run.json", "state.json", "eval.csv"}  # what prepare() writes before training
-EVAL_FIELDS = ["stage", "timesteps", "wall_time", "success_rate", "collision_rate", "timeout_rate", "stuck_rate",
-               "spl", "mean_steps"]
 
 
 def resolve_device(device: str) -> str:
@@ -85,67 +63,6 @@ def git_commit() -> str | None:
     return f"{commit}-dirty" if dirty else commit
 
 
-def _write_json(path: Path, data: dict) -> None:
-    atomic_write(path, lambda tmp: tmp.write_text(json.dumps(data, indent=2)))
-
-
-@dataclass
-class StagePaths:
-    """Where a stage keeps its files."""
-
-    root: Path
-
-    @property
-    def last(self) -> Path:
-        return self.root / "checkpoints" / "last.zip"
-
-    @property
-    def replay(self) -> Path:
-        return self.root / "checkpoints" / "last_replay.npz"
-
-    @property
-    def best(self) -> Path:
-        return self.root / "best.zip"
-
-    @property
-    def policy(self) -> Path:
-        return self.root / "policy.zip"
-
-    @property
-    def tensorboard(self) -> Path:
-        return self.root / "tensorboard"
-
-
-class EvalLog:
-    """``eval.csv``: rows appended and flushed as they come; on resume, rows newer than the
-    checkpoint being resumed are dropped (the run will evaluate those timesteps again)."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-        if not path.exists():
-            atomic_write(path, lambda tmp: tmp.write_text(",".join(EVAL_FIELDS) + "\n"))
-
-    def rows(self) -> list[dict]:
-        with self.path.open(newline="") as handle:
-            return list(csv.DictReader(handle))
-
-    def truncate(self, stage: str, timesteps: int) -> None:
-        keep = [r for r in self.rows() if r["stage"] != stage or int(r["timesteps"]) <= timesteps]
-
-        def write(tmp: Path) -> None:
-            with tmp.open("w", newline="") as handle:
-                writer = csv.DictWriter(handle, fieldnames=EVAL_FIELDS)
-                writer.writeheader()
-                writer.writerows(keep)
-
-        atomic_write(self.path, write)
-
-    def append(self, row: dict) -> None:
-        with self.path.open("a", newline="") as handle:
-            csv.DictWriter(handle, fieldnames=EVAL_FIELDS).writerow(row)
-            handle.flush()
-
-
 def _make_env_kwargs(stage: StageSpec) -> dict:
     spec = stage.scenarios
     world = spec.kind or spec.mix or spec.suite or spec.file
@@ -164,24 +81,6 @@ def _env_class(stage: StageSpec) -> type:
     from physics3d.env import WarehouseNavEnv
 
     return WarehouseNavEnv
-
-
-def _unstarted(out: Path) -> bool:
-    """Whether ``out`` holds only what a run writes before its first checkpoint (and at least that)."""
-    names = {p.name for p in out.iterdir()} - {LOCK_NAME}
-    if not names or not names - {"stages"} <= _PREPARED or not (out / "state.json").exists():
-        return False
-    if (out / "eval.csv").exists() and len((out / "eval.csv").read_text().splitlines()) > 1:
-        return False
-    stages = out / "stages"
-    # Before its first checkpoint a stage holds at most its TensorBoard log.
-    return not stages.exists() or all(p.name == "tensorboard" for stage in stages.iterdir() for p in stage.iterdir())
-
-
-def _clear_unstarted(out: Path) -> None:
-    for name in _PREPARED:
-        (out / name).unlink(missing_ok=True)
-    shutil.rmtree(out / "stages", ignore_errors=True)
 
 
 class Runner:
@@ -216,11 +115,11 @@ class Runner:
 
     def _open(self) -> dict:
         state_path = self.out / "state.json"
-        fresh = _unstarted(self.out)
+        fresh = unstarted(self.out)
         if fresh:
             # A run that died before its first checkpoint (say, a missing dependency) left only
             # what prepare() writes: nothing to keep, nothing to resume.
-            _clear_unstarted(self.out)
+            clear_unstarted(self.out)
         if self.resume and not fresh:
             saved = read_yaml(self.out / "config.yaml")
             if saved != self.config.model_dump(mode="json"):
@@ -231,9 +130,9 @@ class Runner:
                 raise ConfigError(self.out, None, "the run directory is not empty; pass --resume to continue it or choose another --out")
             atomic_write(self.out / "config.yaml",
                          lambda tmp: tmp.write_text(yaml.safe_dump(self.config.model_dump(mode="json"), sort_keys=False)))
-            _write_json(self.out / "run.json", self._provenance())
+            write_json(self.out / "run.json", self._provenance())
             state = {"done": [], "stages": {}}
-            _write_json(state_path, state)
+            write_json(state_path, state)
         self.eval_log = EvalLog(self.out / "eval.csv")
         # The commit the run started from is the code that trains every stage, even when a
         # policy is saved (or the run resumed) after later commits.
@@ -264,7 +163,7 @@ class Runner:
                 result = self._run_stage(index, stage, state)
                 state["stages"][stage.name] = result
                 state["done"].append(stage.name)
-                _write_json(self.out / "state.json", state)
+                write_json(self.out / "state.json", state)
             from common.curriculum.report import write_report
 
             write_report(self.out, self.config, state)
@@ -272,13 +171,17 @@ class Runner:
                 from common.curriculum.evidence import gather_evidence
 
                 state["transfer"] = gather_evidence(self, state)
-                _write_json(self.out / "state.json", state)
+                write_json(self.out / "state.json", state)
         finally:
             self.release()
         return state
 
+    def arm(self, config: CurriculumConfig, out: Path, resume: bool) -> "Runner":
+        """A quiet run of another curriculum on this run's device (an evidence arm)."""
+        return Runner(config, out, resume=resume, device=self.device, progress=False)
+
     def stage_paths(self, index: int, stage: StageSpec) -> StagePaths:
-        return StagePaths(self.out / "stages" / f"{index}-{stage.name}")
+        return StagePaths.of(self.out, index, stage.name)
 
     def _run_stage(self, index: int, stage: StageSpec, state: dict) -> dict:
         import torch
@@ -310,8 +213,8 @@ class Runner:
                 normalizer.apply_to(venv)
             states = file.raw_manifest.get("env_rng") if resuming else None
             if isinstance(states, list) and len(states) == venv.num_envs:
-                for index, state in enumerate(states):
-                    venv.env_method("restore_rng", state, indices=[index])
+                for env_index, env_state in enumerate(states):
+                    venv.env_method("restore_rng", env_state, indices=[env_index])
         already = int(model.num_timesteps)
         self.eval_log.truncate(stage.name, already)
         callback = CurriculumCallback(self, index, stage, paths)
@@ -343,7 +246,8 @@ class Runner:
         agent = PolicyAgent(model, stage.observation, DEFAULT_GOAL_DISTANCE_SCALE, normalizer, name=stage.name,
                             action_mapping=stage.action_mapping, max_steps=stage.max_steps)
         (summary,) = evaluate([agent], stage_scenarios(stage, episodes, seed_shift), stage.world, seed=seed_shift,
-                              max_steps=stage.max_steps, conditions=conditions_of(stage.env_kwargs))
+                              max_steps=stage.max_steps, conditions=conditions_of(stage.env_kwargs),
+                              goal_radius=stage_radius(stage))
         return summary
 
     def evaluate_policy(self, stage: StageSpec, policy: Path, test: bool = True) -> Summary:
@@ -355,42 +259,18 @@ class Runner:
         episodes = (stage.eval.final_episodes or stage.eval.episodes) if test else stage.eval.episodes
         first = TEST_SEED_SHIFT if test else 0
         (summary,) = evaluate([agent], stage_scenarios(stage, episodes, first), stage.world, seed=first,
-                              max_steps=stage.max_steps, conditions=conditions_of(stage.env_kwargs))
+                              max_steps=stage.max_steps, conditions=conditions_of(stage.env_kwargs),
+                              goal_radius=stage_radius(stage))
         return summary
 
     def final_evaluation(self, stage: StageSpec, policy: Path) -> Summary:
         """The report's evaluation of a stage's policy on the test draw of its eval suite."""
         summary = self.evaluate_policy(stage, policy)
         figures = {"suite": stage.eval.suite, "draw": "test", "first_seed": TEST_SEED_SHIFT, **summary.to_json()}
-        _write_json(policy.parent / "final_eval.json", figures)
+        write_json(policy.parent / "final_eval.json", figures)
         atomic_write(policy.parent / "final_episodes.csv", lambda tmp: write_csv([summary], tmp))
         update_manifest(policy, {"final_eval": figures})
         return summary
-
-
-def stage_scenarios(stage: StageSpec, count: int, first: int) -> list[Scenario]:
-    """A draw of the stage's eval suite, judged as the stage trains: within its own goal radius if
-    it sets one (a stage that trains to arrive within 0.1 m is measured on arriving within 0.1 m)."""
-    return with_radius(get_suite(stage.eval.suite).scenarios(count=count, seed=first), judged_radius(stage.env_kwargs))
-
-
-def training_robot(stage: StageSpec) -> RobotProfile:
-    """The robot profile a stage trains with: its conditions' (the tier's default included), else
-    the generator template's."""
-    profile = conditions_of(stage.env_kwargs).for_tier(stage.world).profile
-    return profile if profile is not None else Scenario().robot
-
-
-def manifest_for(runner: Runner, index: int, stage: StageSpec, timesteps: int, wall_time: float,
-                 evaluation: dict | None) -> dict:
-    """What a policy zip says about itself."""
-    return {"algorithm": stage.algorithm, "observation": stage.observation,
-            "goal_distance_scale": DEFAULT_GOAL_DISTANCE_SCALE, "action_mapping": stage.action_mapping,
-            "max_steps": stage.max_steps, "env_kwargs": stage.env_kwargs, "tier": stage.world,
-            "robot": training_robot(stage).model_dump(mode="json"), "curriculum": runner.config.name, "stage": stage.name,
-            "stage_index": index, "seed": runner.config.seed + index, "git_commit": runner.commit,
-            "package_version": common.__version__, "timesteps": timesteps, "wall_time_s": round(wall_time, 1),
-            "eval": evaluation}
 
 
 __all__ = ["Runner", "resolve_device", "TEST_SEED_SHIFT"]

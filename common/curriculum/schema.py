@@ -158,7 +158,7 @@ def _check_env_kwargs(stage: StageSpec, source: str | Path, field: str) -> None:
         if conditions.profile is not None:
             _check_robot_fits(stage, conditions.profile)
         if "goal_threshold" in stage.env_kwargs:
-            from common.nav_env import threshold_range
+            from common.task import threshold_range
 
             threshold_range(stage.env_kwargs["goal_threshold"])
     except ConfigError as error:

@@ -35,11 +35,11 @@ from typing import Any, Callable
 
 import numpy as np
 
+from common.curriculum.sweep_report import METRICS, write_results
 from common.errors import ConfigError, quote
 from common.yaml_io import read_yaml, read_yaml_mapping
 
 DISTRIBUTIONS = ("uniform", "loguniform", "randint", "choice")
-METRICS = ("success_rate", "spl")  # of the last stage's final test draw (and of each validation on the way)
 SEED_STRIDE = 1000  # seeds of a seed sweep: curriculum seed + 1000·k, so no two runs share a stage seed
 
 
@@ -100,27 +100,6 @@ def _tune_domain(kind: str, args: list):
 
     return {"uniform": lambda: tune.uniform(*args), "loguniform": lambda: tune.loguniform(*args),
             "randint": lambda: tune.randint(int(args[0]), int(args[1]) + 1), "choice": lambda: tune.choice(args)}[kind]()
-
-
-# -- aggregate statistics ------------------------------------------------------------------------
-
-
-def aggregate(values: list[float], seed: int = 0, resamples: int = 2000) -> dict[str, Any]:
-    """Mean, interquartile mean (scipy's 25 %-trimmed mean) and its bootstrap 95 % interval."""
-    from scipy import stats
-
-    data = np.asarray(values, dtype=float)
-    out: dict[str, Any] = {"n": int(data.size), "values": [float(v) for v in data]}
-    if data.size == 0:
-        return {**out, "mean": None, "iqm": None, "ci95": None}
-    iqm = float(stats.trim_mean(data, 0.25))
-    if data.size > 1 and np.ptp(data) > 0:
-        result = stats.bootstrap((data,), lambda x, axis: stats.trim_mean(x, 0.25, axis=axis), n_resamples=resamples,
-                                 method="percentile", random_state=np.random.default_rng(seed))
-        ci = [float(result.confidence_interval.low), float(result.confidence_interval.high)]
-    else:
-        ci = [iqm, iqm]
-    return {**out, "mean": float(data.mean()), "iqm": iqm, "ci95": ci}
 
 
 # -- the trial -----------------------------------------------------------------------------------
@@ -238,7 +217,6 @@ def run_sweep(source: str | Path, out: Path, seeds: int = 1, space: str | Path |
         concurrent = int(ray.cluster_resources().get("CPU", 1) // cpus_per_trial)
     finally:
         ray.shutdown()
-    from common.curriculum.sweep_report import write_results
 
     return write_results(out, grid, metric, address, concurrent, time.perf_counter() - began,
                          searched=space is not None)

@@ -12,7 +12,9 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from common.atomic import atomic_write
-from common.curriculum.sweep import METRICS, aggregate
+from common.statistics import aggregate
+
+METRICS = ("success_rate", "spl")  # of the last stage's final test draw (and of each validation on the way)
 
 
 def _trial(result) -> dict[str, Any]:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import shutil
 import time
-from typing import TYPE_CHECKING
+from typing import Callable, Protocol
 
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecNormalize
@@ -12,10 +12,22 @@ from stable_baselines3.common.vec_env import VecNormalize
 from common.atomic import atomic_write
 from common.curriculum.policy_file import Normalizer, save_policy
 from common.curriculum.replay import save_replay
-from common.curriculum.schema import StageSpec
+from common.curriculum.run_directory import EvalLog, StagePaths
+from common.curriculum.schema import CurriculumConfig, StageSpec
+from common.curriculum.stage import manifest_for
+from common.evaluation import Summary
 
-if TYPE_CHECKING:
-    from common.curriculum.runner import Runner, StagePaths
+
+class StageHost(Protocol):
+    """What the callback needs of the run that trains the stage (a :class:`~common.curriculum.runner.Runner`)."""
+
+    config: CurriculumConfig
+    commit: str | None
+    eval_log: EvalLog
+    on_evaluation: Callable[[dict], None] | None
+
+    def evaluate_model(self, model, stage: StageSpec, normalizer: Normalizer | None, episodes: int,
+                       seed_shift: int) -> Summary: ...
 
 
 class CurriculumCallback(BaseCallback):
@@ -23,7 +35,7 @@ class CurriculumCallback(BaseCallback):
     and the last checkpoint (atomically, in that order after the row), and stop the stage once the
     promotion threshold is met."""
 
-    def __init__(self, runner: "Runner", index: int, stage: StageSpec, paths: "StagePaths") -> None:
+    def __init__(self, runner: StageHost, index: int, stage: StageSpec, paths: StagePaths) -> None:
         super().__init__()
         self.runner, self.index, self.stage, self.paths = runner, index, stage, paths
         rows = [r for r in runner.eval_log.rows() if r["stage"] == stage.name]
@@ -61,8 +73,6 @@ class CurriculumCallback(BaseCallback):
             self.eval_seconds += time.perf_counter() - began
 
     def _evaluate_and_save(self, model) -> bool:
-        from common.curriculum.runner import manifest_for
-
         normalizer = self._normalizer(model)
         summary = self.runner.evaluate_model(model, self.stage, normalizer, self.stage.eval.episodes, seed_shift=0)
         timesteps = int(model.num_timesteps)
@@ -74,7 +84,7 @@ class CurriculumCallback(BaseCallback):
         }
         self.runner.eval_log.append(row)
         self.last_eval_at = timesteps
-        manifest = manifest_for(self.runner, self.index, self.stage, timesteps, self.wall_time(),
+        manifest = manifest_for(self.runner.config, self.runner.commit, self.index, timesteps, self.wall_time(),
                                 {"suite": self.stage.eval.suite, "draw": "validation", **summary.to_json()})
         if summary.success_rate > self.best_success or not self.paths.best.exists():
             self.best_success = max(self.best_success, summary.success_rate)

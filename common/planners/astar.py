@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from common.kernel_cache import kernel
 
 from common.occupancy import OccupancyGrid
 from common.planners.base import Point, grid_arrays, path_length
@@ -23,7 +23,7 @@ _DC = np.array([1, 0, -1, 0, 1, -1, 1, -1], dtype=np.int64)
 _COST = np.array([1.0, 1.0, 1.0, 1.0, math.sqrt(2.0), math.sqrt(2.0), math.sqrt(2.0), math.sqrt(2.0)])
 
 
-@njit(cache=True)
+@kernel
 def _heap_push(keys: np.ndarray, items: np.ndarray, size: int, key: float, item: int) -> None:
     """Insert at position ``size`` and sift up (the caller has made room)."""
     i = size
@@ -38,7 +38,7 @@ def _heap_push(keys: np.ndarray, items: np.ndarray, size: int, key: float, item:
     items[i] = item
 
 
-@njit(cache=True)
+@kernel
 def _heap_pop(keys: np.ndarray, items: np.ndarray, size: int) -> int:
     """Remove and return the item with the smallest key from a heap of ``size`` entries."""
     top = items[0]
@@ -62,7 +62,7 @@ def _heap_pop(keys: np.ndarray, items: np.ndarray, size: int) -> int:
     return top
 
 
-@njit(cache=True)
+@kernel
 def _astar(occupied: np.ndarray, start: int, goal: int, neighbours: int) -> np.ndarray:
     """Flat cell indices of a shortest path start → goal, or an empty array if there is none."""
     rows, cols = occupied.shape

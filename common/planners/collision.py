@@ -10,10 +10,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from common.kernel_cache import kernel
 
 
-@njit(cache=True)
+@kernel
 def point_free(occupied: np.ndarray, x0: float, y0: float, resolution: float, x: float, y: float) -> bool:
     """Whether (x, y) lies on the grid in a free cell."""
     u = (x - x0) / resolution
@@ -23,7 +23,7 @@ def point_free(occupied: np.ndarray, x0: float, y0: float, resolution: float, x:
     return not occupied[int(v), int(u)]
 
 
-@njit(cache=True)
+@kernel
 def segment_free_sampled(occupied: np.ndarray, x0: float, y0: float, resolution: float,
                          ax: float, ay: float, bx: float, by: float) -> bool:
     """Whether points sampled along a→b at most half a cell apart (ends included) are all free.
@@ -40,14 +40,14 @@ def segment_free_sampled(occupied: np.ndarray, x0: float, y0: float, resolution:
     return True
 
 
-@njit(cache=True)
+@kernel
 def _cell_free(occupied: np.ndarray, row: int, col: int) -> bool:
     if row < 0 or col < 0 or row >= occupied.shape[0] or col >= occupied.shape[1]:
         return False
     return not occupied[row, col]
 
 
-@njit(cache=True)
+@kernel
 def line_of_sight(occupied: np.ndarray, x0: float, y0: float, resolution: float,
                   ax: float, ay: float, bx: float, by: float) -> bool:
     """Whether every cell the segment a→b passes through is free (Amanatides–Woo traversal).

@@ -9,14 +9,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from common.kernel_cache import kernel
 
 from common.occupancy import OccupancyGrid
 from common.planners.base import Point, grid_arrays
 from common.planners.collision import segment_free_sampled
 
 
-@njit(cache=True)
+@kernel
 def _rrt(occupied: np.ndarray, x0: float, y0: float, resolution: float, start: np.ndarray, goal: np.ndarray,
          draws: np.ndarray, goal_bias: float, step: float) -> np.ndarray:
     """The tree's path start → goal as world points (N, 2), or an empty (0, 2) array.

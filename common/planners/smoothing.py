@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from common.kernel_cache import kernel
 
 from common.occupancy import OccupancyGrid
 from common.planners.base import grid_arrays
 from common.planners.collision import line_of_sight
 
 
-@njit(cache=True)
+@kernel
 def _shortcut(occupied: np.ndarray, x0: float, y0: float, resolution: float, points: np.ndarray) -> np.ndarray:
     """Indices of the kept waypoints: from each kept point, the farthest one in line of sight."""
     n = points.shape[0]

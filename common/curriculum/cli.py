@@ -82,14 +82,19 @@ def _sweep(args: argparse.Namespace) -> int:
 
 def _eval(args: argparse.Namespace) -> int:
     from common.evaluation import evaluate
-    from common.report import markdown_table
+    from common.curriculum.comparison import markdown_table
 
+    agents = _policies(args.policy)
+    _settle(args, agents)
     scenarios = _scenarios(args)
     # Each policy runs episodes as long as, under the conditions and judged within the goal radius
     # it trained with, unless --max-steps, --env-kwargs and --goal-threshold say otherwise.
-    summaries = [summary for agent in _policies(args.policy)
-                 for summary in evaluate([agent], _judged(args, scenarios, [agent]), args.world, seed=args.seed,
-                                         max_steps=args.max_steps, conditions=_conditions(args, [agent]))]
+    summaries = []
+    for agent in agents:
+        radius, conditions = _judged(args, [agent]), _conditions(args, [agent])
+        _announce(args, agent.name, len(scenarios), radius, conditions)
+        summaries += evaluate([agent], scenarios, args.world, seed=args.seed, max_steps=args.max_steps,
+                              conditions=conditions, goal_radius=radius)
     if args.json:
         print(json.dumps(summaries[0].to_json() if len(summaries) == 1 else {s.agent: s.to_json() for s in summaries}))
     else:
@@ -104,7 +109,7 @@ def _policies(paths):
 
 
 def _bench(args: argparse.Namespace) -> int:
-    from common.bench import gui_figures, run_benchmarks
+    from common.curriculum.bench import gui_figures, run_benchmarks
 
     measure = gui_figures if args.gui else run_benchmarks
     results = measure(steps=args.steps) if args.steps else measure()  # each has its own default
@@ -138,18 +143,40 @@ def _scenarios(args: argparse.Namespace, count: int | None = None):
     return scenarios
 
 
-def _judged(args: argparse.Namespace, scenarios, agents):
-    """The scenarios judged within ``--goal-threshold``, else within the goal radius the policies
-    among ``agents`` trained with (which must agree), else each scenario's own."""
-    from common.nav_env import judged_radius, with_radius
+def _settle(args: argparse.Namespace, agents) -> None:
+    """Fill in --world, --suite, --seed and --episodes left unset: as the policies among ``agents``
+    had their own test figure measured (if they agree), else flatland, sparse, seed 0 and the
+    command's own number of episodes."""
+    homes = {agent.home for agent in agents if getattr(agent, "home", None) is not None}
+    world, suite, seed, episodes = homes.pop() if len(homes) == 1 else ("flatland", "sparse", 0, args.default_episodes)
+    args.world = args.world or world
+    args.suite = args.suite or suite
+    args.seed = seed if args.seed is None else args.seed
+    if hasattr(args, "episodes"):
+        args.episodes = episodes if args.episodes is None else args.episodes
+
+
+def _announce(args: argparse.Namespace, agents: str, episodes: int, radius: float | None, conditions) -> None:
+    """Say on stderr what the agents are measured on, so a figure can be told apart and re-run."""
+    source = args.scenario_file or f"suite {args.suite}"
+    judged = f"within {radius:g} m of the goal" if radius is not None else "within each scenario's goal radius"
+    knobs = ", ".join(f"{k}={v}" for k, v in conditions.for_tier(args.world).given().items()) or "ideal"
+    print(f"{agents}: {args.world}, {source}, {episodes} episodes from seed {args.seed}, judged {judged}; "
+          f"conditions: {knobs}", file=sys.stderr)
+
+
+def _judged(args: argparse.Namespace, agents) -> float | None:
+    """The goal radius to judge by: ``--goal-threshold``, else the radius the policies among
+    ``agents`` trained for (which must agree), else None (each scenario's own)."""
+    from common.task import judged_radius
 
     if args.goal_threshold is not None:
-        return with_radius(scenarios, args.goal_threshold)
+        return args.goal_threshold
     radii = {judged_radius(agent.env_kwargs) for agent in agents if hasattr(agent, "env_kwargs")}
     if len(radii) > 1:
         raise ConfigError(None, "--policy", f"these policies trained for different goal radii ({sorted(map(str, radii))}); "
                           "give --goal-threshold to judge them alike")
-    return with_radius(scenarios, radii.pop() if radii else None)
+    return radii.pop() if radii else None
 
 
 def _controllers(names: str | None, flag: str):
@@ -179,24 +206,27 @@ def _compare(args: argparse.Namespace) -> int:
     from rich.progress import Progress
 
     from common.evaluation import evaluate
-    from common.report import bar_chart, markdown_table, write_csv
+    from common.curriculum.comparison import bar_chart, markdown_table, write_csv
 
     agents = _controllers(args.controllers, "--controllers") + _policies(args.policy)
-    scenarios = _judged(args, _scenarios(args), agents)
+    _settle(args, agents)
+    scenarios = _scenarios(args)
+    radius, conditions = _judged(args, agents), _conditions(args, agents)
     source = Path(args.scenario_file).stem if args.scenario_file else args.suite
     out = Path(args.out) if args.out else Path("runs") / "compare" / f"{args.world}-{source}"
     out.mkdir(parents=True, exist_ok=True)
+    _announce(args, f"{len(agents)} agents", len(scenarios), radius, conditions)
     with Progress(transient=True, console=_stderr_console()) as bar:
         task = bar.add_task(f"{source}: {len(agents)} agents x {len(scenarios)} episodes", total=len(agents) * len(scenarios))
         summaries = evaluate(agents, scenarios, args.world, seed=args.seed, max_steps=args.max_steps,
-                             conditions=_conditions(args, agents),
-                             progress=lambda n: bar.advance(task, n))
-    title = f"{args.world} / {source}: {len(scenarios)} episodes, seed {args.seed}"
+                             conditions=conditions, goal_radius=radius, progress=lambda n: bar.advance(task, n))
+    judged = f"{radius:g} m" if radius is not None else "each scenario's radius"
+    title = f"{args.world} / {source}: {len(scenarios)} episodes from seed {args.seed}, judged within {judged}"
     table = markdown_table(summaries, title)
     (out / "comparison.md").write_text(table)
     write_csv(summaries, out / "episodes.csv")
     bar_chart(summaries, out / "comparison.png", title)
-    gifs = [_record(agent, scenarios[0], args, Path(args.gif) / f"{_file_name(agent.name)}.gif")[0]
+    gifs = [_record(agent, scenarios[0], args, Path(args.gif) / f"{_file_name(agent.name)}.gif", radius=radius)[0]
             for agent in agents] if args.gif else []
     if args.json:
         print(json.dumps({s.agent: s.to_json() for s in summaries}))
@@ -235,21 +265,23 @@ def _file_name(name: str) -> str:
     return "".join(c if c.isalnum() or c in "-_." else "-" for c in name)
 
 
-def _record(agent, scenario, args: argparse.Namespace, gif: Path, every: int = 1):
+def _record(agent, scenario, args: argparse.Namespace, gif: Path, radius: float | None, every: int = 1):
     from flatland.render import record_agent
 
     return record_agent(agent, scenario, gif, tier=args.world, seed=args.seed, max_steps=args.max_steps, every=every,
-                        conditions=_conditions(args, [agent]))
+                        conditions=_conditions(args, [agent]), goal_radius=radius)
 
 
 def _render(args: argparse.Namespace) -> int:
     from flatland.render import plot_odometry_drift
 
     agent = _agent(args.agent)
-    scenario = _judged(args, _scenarios(args, count=args.index + 1), [agent])[args.index]
-    if args.encoder_noise is not None:
-        scenario = scenario.model_copy(update={"robot": scenario.robot.model_copy(update={"encoder_noise": args.encoder_noise})})
-    gif, episode, true_path, estimate = _record(agent, scenario, args, Path(args.out), args.every)
+    _settle(args, [agent])
+    scenario = _scenarios(args, count=args.index + 1)[args.index]
+    radius, conditions = _judged(args, [agent]), _conditions(args, [agent])
+    _announce(args, agent.name, 1, radius, conditions)
+    scenario = conditions.for_tier(args.world).scenario(scenario)  # the robot and the encoders that drive
+    gif, episode, true_path, estimate = _record(agent, scenario, args, Path(args.out), radius, args.every)
     print(f"{gif}: {agent.name} on {scenario.name}: {episode.outcome} after {episode.steps} steps, "
           f"{episode.path_length:.2f} m")
     if args.drift:
@@ -271,14 +303,19 @@ def _add_scenario_source(parser: argparse.ArgumentParser, episodes: int | None) 
     from common.generators import SUITES
     from common.tiers import TIERS
 
-    parser.add_argument("--world", default="flatland", choices=TIERS, help="the tier (default flatland)")
+    parser.add_argument("--world", choices=TIERS,
+                        help="the tier (default: where a policy's own test figure was measured, else flatland)")
     source = parser.add_mutually_exclusive_group()
-    source.add_argument("--suite", default="sparse", choices=sorted(SUITES), help="a named suite (default sparse)")
+    source.add_argument("--suite", choices=sorted(SUITES),
+                        help="a named suite (default: a policy's own test suite, else sparse)")
     source.add_argument("--scenario-file", metavar="FILE", help="a scenario or IR-SIM world YAML")
+    parser.set_defaults(default_episodes=episodes)
     if episodes is not None:
-        parser.add_argument("--episodes", type=_whole(1, 1_000_000), default=episodes, help=f"episodes (default {episodes})")
-    parser.add_argument("--seed", type=_whole(0, 2**32 - 1), default=0,
-                        help="shifts the suite's base seed and the noise seeds (0 to 2^32 - 1)")
+        parser.add_argument("--episodes", type=_whole(1, 1_000_000),
+                            help=f"episodes (default: as many as a policy's own test figure, else {episodes})")
+    parser.add_argument("--seed", type=_whole(0, 2**32 - 1),
+                        help="shifts the suite's base seed and the noise seeds, 0 to 2^32 - 1 (default: a "
+                             "policy's own test draw's, else 0)")
     parser.add_argument("--max-steps", type=_whole(1, 1_000_000), default=None,
                         help="steps before a timeout (default: a policy's own episode length, else 500)")
     parser.add_argument("--goal-threshold", type=_metres, metavar="M",
@@ -325,17 +362,6 @@ def _metres(text: str) -> float:
         raise argparse.ArgumentTypeError(f"expected a number of metres, got {text!r}") from None
     if not (math.isfinite(value) and 0.0 < value <= 1000.0):
         raise argparse.ArgumentTypeError(f"must be more than 0 and at most 1000 m, got {text}")
-    return value
-
-
-def _fraction(text: str) -> float:
-    """An argparse type: a finite number in [0, 1]."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (math.isfinite(value) and 0.0 <= value <= 1.0):
-        raise argparse.ArgumentTypeError(f"must be a number from 0 to 1, got {text}")
     return value
 
 
@@ -410,8 +436,6 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--out", default="episode.gif", help="the GIF to write (default episode.gif)")
     render.add_argument("--every", type=_whole(1, 1000), default=1, help="keep every k-th frame (default 1)")
     render.add_argument("--drift", metavar="PNG", help="also plot the true path against wheel odometry")
-    render.add_argument("--encoder-noise", type=_fraction,
-                        help="relative encoder noise for the episode, 0 to 1 (e.g. 0.02)")
     render.set_defaults(handler=_render)
     return parser
 

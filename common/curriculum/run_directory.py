@@ -1,0 +1,114 @@
+"""A run directory's files: where each stage keeps its checkpoints and policies, and eval.csv.
+
+Run directory::
+
+    OUT/config.yaml          the resolved, validated curriculum
+    OUT/run.json             package version, git commit, seeds, devices, start time
+    OUT/state.json           curriculum position (which stages are done), rewritten atomically
+    OUT/eval.csv             every periodic evaluation of every stage
+    OUT/report.md            the final evaluation table per stage, figures, throughput
+    OUT/learning_curve.png   success rate and SPL against timesteps
+    OUT/stages/I-NAME/       checkpoints/last.zip (+ last_replay.npz), best.zip, policy.zip, tensorboard/
+    OUT/.lock                held while a run works in the directory
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+from common.atomic import atomic_write
+
+LOCK_NAME = ".lock"
+_PREPARED = {"config.yaml", "run.json", "state.json", "eval.csv"}  # what a run writes before training
+EVAL_FIELDS = ["stage", "timesteps", "wall_time", "success_rate", "collision_rate", "timeout_rate", "stuck_rate",
+               "spl", "mean_steps"]
+
+
+def write_json(path: Path, data: dict) -> None:
+    """Write ``data`` as JSON, atomically."""
+    atomic_write(path, lambda tmp: tmp.write_text(json.dumps(data, indent=2)))
+
+
+@dataclass
+class StagePaths:
+    """Where a stage keeps its files."""
+
+    root: Path
+
+    @property
+    def last(self) -> Path:
+        return self.root / "checkpoints" / "last.zip"
+
+    @property
+    def replay(self) -> Path:
+        return self.root / "checkpoints" / "last_replay.npz"
+
+    @property
+    def best(self) -> Path:
+        return self.root / "best.zip"
+
+    @property
+    def policy(self) -> Path:
+        return self.root / "policy.zip"
+
+    @property
+    def tensorboard(self) -> Path:
+        return self.root / "tensorboard"
+
+
+    @classmethod
+    def of(cls, out: Path, index: int, name: str) -> "StagePaths":
+        """The files of stage ``index`` (named ``name``) of the run in ``out``."""
+        return cls(out / "stages" / f"{index}-{name}")
+
+
+class EvalLog:
+    """``eval.csv``: rows appended and flushed as they come; on resume, rows newer than the
+    checkpoint being resumed are dropped (the run will evaluate those timesteps again)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        if not path.exists():
+            atomic_write(path, lambda tmp: tmp.write_text(",".join(EVAL_FIELDS) + "\n"))
+
+    def rows(self) -> list[dict]:
+        with self.path.open(newline="") as handle:
+            return list(csv.DictReader(handle))
+
+    def truncate(self, stage: str, timesteps: int) -> None:
+        keep = [r for r in self.rows() if r["stage"] != stage or int(r["timesteps"]) <= timesteps]
+
+        def write(tmp: Path) -> None:
+            with tmp.open("w", newline="") as handle:
+                writer = csv.DictWriter(handle, fieldnames=EVAL_FIELDS)
+                writer.writeheader()
+                writer.writerows(keep)
+
+        atomic_write(self.path, write)
+
+    def append(self, row: dict) -> None:
+        with self.path.open("a", newline="") as handle:
+            csv.DictWriter(handle, fieldnames=EVAL_FIELDS).writerow(row)
+            handle.flush()
+
+
+def unstarted(out: Path) -> bool:
+    """Whether ``out`` holds only what a run writes before its first checkpoint (and at least that)."""
+    names = {p.name for p in out.iterdir()} - {LOCK_NAME}
+    if not names or not names - {"stages"} <= _PREPARED or not (out / "state.json").exists():
+        return False
+    if (out / "eval.csv").exists() and len((out / "eval.csv").read_text().splitlines()) > 1:
+        return False
+    stages = out / "stages"
+    # Before its first checkpoint a stage holds at most its TensorBoard log.
+    return not stages.exists() or all(p.name == "tensorboard" for stage in stages.iterdir() for p in stage.iterdir())
+
+
+def clear_unstarted(out: Path) -> None:
+    for name in _PREPARED:
+        (out / name).unlink(missing_ok=True)
+    shutil.rmtree(out / "stages", ignore_errors=True)

@@ -1,0 +1,108 @@
+"""The rules of an episode, for the env and the evaluator alike: the goal radius, and how it ends.
+
+An episode ends in *success* when the robot's true position comes within the goal radius of the
+goal, checked first, so arriving and touching on the same step counts as arriving; in *collision*
+when the robot touches anything; in *stuck* (when judged: the evaluator does, training does not)
+when it drove less than :data:`STUCK_DISTANCE` over the last :data:`STUCK_WINDOW` steps; and in
+*timeout* when it reaches its step limit. The env terminates on success and collision and
+truncates on timeout (a crash must not bootstrap from the next state).
+
+The goal radius is a scenario's own, or a ``goal_threshold``: a radius for every episode, or
+``[low, high]`` drawn per episode (a policy trained so arrives whatever radius it is judged by,
+and is judged by the smallest: :func:`judged_radius`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from common.errors import ConfigError, quote
+from common.readings import Readings
+from common.scenario import MAX_LENGTH, Scenario
+
+OUTCOMES = ("success", "collision", "timeout", "stuck")
+DEFAULT_MAX_STEPS = 500
+STUCK_WINDOW = 100  # steps
+STUCK_DISTANCE = 0.1  # m: an agent that moved less than this over the window is stuck
+
+GoalThreshold = float | Sequence[float] | None
+
+
+def threshold_range(value: GoalThreshold) -> tuple[float, float] | None:
+    """``goal_threshold`` as (low, high): None keeps each scenario's, a number fixes it, a pair is drawn
+    from uniformly per episode."""
+    if value is None:
+        return None
+    pair = (value, value) if isinstance(value, (int, float)) and not isinstance(value, bool) else value
+    try:
+        low, high = (float(v) for v in pair)
+    except (TypeError, ValueError):
+        raise ConfigError(None, "goal_threshold", f"got {quote(value)}; allowed: null, a number or [low, high] in metres") from None
+    if not (0.0 < low <= high <= MAX_LENGTH):
+        raise ConfigError(None, "goal_threshold", f"got {quote(value)}; allowed: 0 < low <= high <= {MAX_LENGTH:g} m")
+    return low, high
+
+
+def judged_radius(env_kwargs: Mapping[str, Any]) -> float | None:
+    """The goal radius a policy trained with ``env_kwargs`` is judged by: its ``goal_threshold``,
+    the smallest of a range (it trained to arrive that close), or None (each scenario's own)."""
+    limits = threshold_range(env_kwargs.get("goal_threshold"))
+    return None if limits is None else limits[0]
+
+
+class Task:
+    """Judges episodes: ``start`` at the first readings, then ``step`` with each next readings
+    until it returns an outcome.
+
+    Args:
+        goal_threshold: the goal radius (see the module); None: each scenario's own.
+        max_steps: steps before a timeout.
+        judge_stuck: end an episode that stopped making way (the evaluator's rule).
+    """
+
+    def __init__(self, goal_threshold: GoalThreshold = None, max_steps: int = DEFAULT_MAX_STEPS,
+                 judge_stuck: bool = False) -> None:
+        self.threshold = threshold_range(goal_threshold)
+        self.max_steps = int(max_steps)
+        self.judge_stuck = judge_stuck
+        self.goal, self.radius = (0.0, 0.0), 0.0
+        self.distance = self.travelled = 0.0
+        self.steps = 0
+        self._position = (0.0, 0.0)
+        self._recent: list[float] = []
+
+    def radius_for(self, scenario: Scenario, rng: np.random.Generator | None = None) -> float:
+        """The goal radius of an episode of ``scenario``: drawn from ``rng`` if the threshold is a range."""
+        if self.threshold is None:
+            return scenario.goal_threshold
+        low, high = self.threshold
+        return float(rng.uniform(low, high)) if high > low and rng is not None else low
+
+    def start(self, scenario: Scenario, readings: Readings, rng: np.random.Generator | None = None) -> None:
+        """Begin an episode of ``scenario`` at ``readings``."""
+        self.goal, self.radius = scenario.goal, self.radius_for(scenario, rng)
+        self.steps, self.travelled = 0, 0.0
+        self._position = (readings.pose[0], readings.pose[1])
+        self.distance = math.hypot(self.goal[0] - self._position[0], self.goal[1] - self._position[1])
+        self._recent = [0.0]
+
+    def step(self, readings: Readings) -> str | None:
+        """Account for one step that led to ``readings``; the episode's outcome if it ended."""
+        x, y = readings.pose[0], readings.pose[1]
+        self.steps += 1
+        self.travelled += math.hypot(x - self._position[0], y - self._position[1])
+        self._position = (x, y)
+        self.distance = math.hypot(self.goal[0] - x, self.goal[1] - y)
+        if self.distance < self.radius:
+            return "success"
+        if readings.collided:
+            return "collision"
+        if self.judge_stuck:
+            recent = self._recent
+            recent.append(self.travelled)
+            if len(recent) > STUCK_WINDOW and recent[-1] - recent[-1 - STUCK_WINDOW] < STUCK_DISTANCE:
+                return "stuck"
+        return "timeout" if self.steps >= self.max_steps else None

@@ -1,0 +1,115 @@
+"""One set of episode rules: the env and the evaluator end the same episode alike, at the same radius."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import flatland  # noqa: F401  (registers the env)
+from common.errors import ConfigError
+from common.evaluation import run_episode
+from common.generators import get_suite
+from common.readings import Readings
+from common.scenario import CircleObstacle, Scenario
+from common.task import STUCK_WINDOW, Task, judged_radius, threshold_range
+from flatland.world import World
+
+OPEN = Scenario(start=(1.0, 5.0, 0.0), goal=(7.0, 5.0), goal_threshold=0.3)
+
+
+class Replay:
+    """An agent that sends a fixed list of commands, then stands still."""
+
+    name = "replay"
+
+    def __init__(self, commands: list[tuple[float, float]]) -> None:
+        self.commands = commands
+
+    def bind(self, robot, lidar, goal_threshold) -> None:
+        self.radius = goal_threshold
+
+    def reset(self) -> None:
+        self.step = 0
+
+    def act(self, readings, goal):
+        self.step += 1
+        return self.commands[self.step - 1] if self.step <= len(self.commands) else (0.0, 0.0)
+
+
+def _env_outcome(scenario: Scenario, commands, radius: float | None, max_steps: int) -> tuple[str, int]:
+    """Drive the gym env with raw commands (its linear action mapping inverted) to its episode's end."""
+    env = gym.make("flatland/Nav-v0", world=scenario, goal_threshold=radius, max_steps=max_steps).unwrapped
+    env.reset(seed=0)
+    robot = env.scenario.robot
+    for step, (v, w) in enumerate(commands + [(0.0, 0.0)] * max_steps, start=1):
+        action = np.array([2.0 * (v - robot.v_min) / (robot.v_max - robot.v_min) - 1.0, w / robot.w_max], np.float32)
+        _, _, terminated, truncated, info = env.step(action)
+        if terminated or truncated:
+            outcome = "success" if info["is_success"] else "collision" if terminated else "timeout"
+            return outcome, step
+    raise AssertionError("the env never ended the episode")
+
+
+@pytest.mark.parametrize("case, commands, radius, max_steps", [
+    ("arrives within the scenario's radius", [(1.0, 0.0)] * 80, None, 200),
+    ("arrives within a tighter radius later", [(1.0, 0.0)] * 57 + [(0.1, 0.0)] * 40, 0.05, 200),
+    ("hits the post", [(1.0, 0.0)] * 80, None, 200),
+    ("runs out of steps", [(0.5, 1.0)] * 60, None, 30),
+])
+def test_the_env_and_the_evaluator_end_the_same_drive_alike(case, commands, radius, max_steps):
+    scenario = OPEN
+    if case == "hits the post":
+        scenario = OPEN.model_copy(update={"obstacles": [CircleObstacle(x=4.0, y=5.0, radius=0.5)]})
+    episode = run_episode(Replay(commands), scenario, max_steps=max_steps, goal_radius=radius)
+    assert (episode.outcome, episode.steps) == _env_outcome(scenario, commands, radius, max_steps)
+    assert episode.outcome == {"arrives within the scenario's radius": "success", "hits the post": "collision",
+                               "arrives within a tighter radius later": "success",
+                               "runs out of steps": "timeout"}[case]
+
+
+def test_the_evaluator_judges_within_the_radius_it_is_given():
+    # Stop 0.2 m short of the goal: within the scenario's 0.3 m, not within 0.1 m.
+    short = [(0.5, 0.0)] * 116  # 5.8 m at 0.05 m a step
+    assert run_episode(Replay(short), OPEN, max_steps=300).outcome == "success"
+    tight = run_episode(Replay(short), OPEN, max_steps=300, goal_radius=0.1)
+    assert tight.outcome == "stuck" and tight.shortest_path == pytest.approx(6.0 - 0.1, abs=0.05)
+
+
+def test_an_agent_that_stops_making_way_is_stuck_only_when_judged_so():
+    world = World(OPEN)
+    readings = world.reset()
+    judged, training = Task(judge_stuck=True), Task()
+    judged.start(OPEN, readings)
+    training.start(OPEN, readings)
+    outcomes = [(judged.step(world.step(0.0, 0.0)), training.step(world.readings)) for _ in range(STUCK_WINDOW)]
+    assert outcomes[-1] == ("stuck", None) and all(o == (None, None) for o in outcomes[:-1])
+
+
+def test_a_radius_range_is_drawn_per_episode_from_the_generator_and_judged_at_its_low_end():
+    task = Task(goal_threshold=[0.1, 0.5])
+    radii = {task.radius_for(OPEN, np.random.default_rng(seed)) for seed in range(5)}
+    assert len(radii) == 5 and all(0.1 <= r <= 0.5 for r in radii)
+    assert task.radius_for(OPEN, np.random.default_rng(3)) in radii  # the same generator, the same radius
+    assert Task().radius_for(OPEN) == 0.3 and Task(0.2).radius_for(OPEN, np.random.default_rng(0)) == 0.2
+    assert judged_radius({"goal_threshold": [0.1, 0.5]}) == 0.1 and judged_radius({}) is None
+
+
+@pytest.mark.parametrize("value, message", [
+    ("far", "allowed: null, a number or [low, high] in metres"),
+    ([0.5, 0.1], "allowed: 0 < low <= high"),
+    (0.0, "allowed: 0 < low <= high"),
+])
+def test_a_bad_goal_threshold_is_one_line_naming_it(value, message):
+    with pytest.raises(ConfigError, match="goal_threshold") as caught:
+        threshold_range(value)
+    assert message in str(caught.value) and "\n" not in str(caught.value)
+
+
+def test_arriving_and_touching_on_the_same_step_counts_as_arriving():
+    task = Task()
+    start = World(OPEN).reset()
+    task.start(OPEN, start)
+    arrived = Readings(pose=(6.9, 5.0, 0.0), velocity=start.velocity, odometry=start.odometry, lidar=start.lidar,
+                       imu=start.imu, collided=True, time=0.1)
+    assert task.step(arrived) == "success"
