@@ -49,6 +49,7 @@ consumer parts), and 0.005 rad/s of noise per reading.
 
 from __future__ import annotations
 
+import functools
 from typing import Annotated, Any, Literal, NamedTuple
 
 import numpy as np
@@ -146,9 +147,9 @@ class Conditions(BaseModel):
         """The knobs set (not left to a default), as plain data for a manifest."""
         return self.model_dump(mode="json", exclude_none=True)
 
-    @property
+    @functools.cached_property
     def profile(self) -> RobotProfile | None:
-        """The robot profile asked for, if any."""
+        """The robot profile asked for, if any (built once: a world asks at every scenario it loads)."""
         return robot_profile(self.robot) if self.robot is not None else None
 
     def scenario(self, scenario: Scenario) -> Scenario:
@@ -157,7 +158,7 @@ class Conditions(BaseModel):
         robot = self.profile or scenario.robot
         if self.odometry_noise is not None and self.odometry_noise != robot.encoder_noise:
             robot = robot.model_copy(update={"encoder_noise": self.odometry_noise})
-        if robot != scenario.robot:
+        if robot is not scenario.robot and robot != scenario.robot:
             update["robot"] = robot
         if self.lidar_noise is not None and self.lidar_noise != scenario.lidar.noise_std:
             update["lidar"] = scenario.lidar.model_copy(update={"noise_std": self.lidar_noise})

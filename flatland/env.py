@@ -79,8 +79,7 @@ class NavEnv(NavigationEnv):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
-        if self.world is not None and self.world.accepts(scenario):
-            self.world.load(scenario)
+        if self.world is not None and self.world.load(scenario):
             return self.world
         return World(scenario, conditions=self.conditions)
 

@@ -102,24 +102,19 @@ class World:
         self.steps = 0
         self.readings: Readings | None = None
 
-    def accepts(self, scenario: Scenario) -> bool:
-        """Whether :meth:`load` can take ``scenario``: the same robot, lidar and world rectangle
-        (under this world's conditions)."""
-        return self._fits(self.conditions.scenario(scenario))
-
-    def _fits(self, conditioned: Scenario) -> bool:
-        current = self.scenario
-        return conditioned.robot == current.robot and conditioned.lidar == current.lidar and conditioned.world == current.world
-
-    def load(self, scenario: Scenario) -> None:
+    def load(self, scenario: Scenario) -> bool:
         """Swap in another scenario's obstacles, start and goal, keeping the space, the robot and
-        its conditions (much cheaper than a new World); :meth:`reset` starts its first episode."""
+        its conditions (much cheaper than a new World), if the scenario has the same robot, lidar
+        and world rectangle (under this world's conditions); whether it had. :meth:`reset` starts
+        its first episode."""
         scenario = self.conditions.scenario(scenario)
-        if not self._fits(scenario):
-            raise ValueError("load() takes a scenario with the same robot, lidar and world; build a new World")
+        current = self.scenario
+        if not (scenario.robot == current.robot and scenario.lidar == current.lidar and scenario.world == current.world):
+            return False
         self.scenario = scenario
         self.lidar.place(*self._add_obstacles(scenario))
         self.pose = scenario.start_pose
+        return True
 
     def _add_walls(self, world: WorldSpec) -> np.ndarray:
         """Add the boundary walls (if the world has them) to the space; their edges for the lidar."""

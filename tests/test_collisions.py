@@ -465,7 +465,7 @@ def test_a_loaded_world_drives_each_scenario_as_a_new_world_would():
     collisions = 0
     for scenario in scenarios:
         actions = np.column_stack([rng.uniform(0.5, 1.0, 120), rng.uniform(-1.0, 1.0, 120)])
-        reused.load(scenario)
+        assert reused.load(scenario)
         loaded, fresh = _episode(reused, actions), _episode(World(scenario), actions)
         for mine, theirs in zip(loaded, fresh):
             assert mine.pose == theirs.pose and mine.collided == theirs.collided
@@ -479,10 +479,10 @@ def test_a_loaded_world_drives_each_scenario_as_a_new_world_would():
 def test_a_world_loads_only_scenarios_of_its_own_robot_lidar_and_world():
     world = make_world()
     other = world.scenario.model_copy(update={"robot": RobotProfile(radius=0.3)})
-    assert world.accepts(world.scenario.model_copy(update={"obstacles": [CircleObstacle(x=3, y=3, radius=1)]}))
-    assert not world.accepts(other)
-    with pytest.raises(ValueError, match="same robot"):
-        world.load(other)
+    before = world.scenario
+    assert not world.load(other) and world.scenario is before  # refused, and nothing changed
+    assert world.load(before.model_copy(update={"obstacles": [CircleObstacle(x=3, y=3, radius=1)]}))
+    assert len(world.scenario.obstacles) == 1
 
 
 # --- the compiled step ------------------------------------------------------------------------
