@@ -13,6 +13,7 @@ Two mappings of a[0] to v:
 from __future__ import annotations
 
 import math
+import numbers
 
 import numpy as np
 from gymnasium import spaces
@@ -24,18 +25,34 @@ ACTION_SPACE = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
 MAPPINGS = ("linear", "rectified")
 
 
+def _is_number(value) -> bool:
+    """A real number: not a bool, and not a string such as "0.5" that float() would read."""
+    kind = type(value)
+    if kind is float or kind is int:  # the common case, without the slower abstract-class check
+        return True
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
 def _components(action) -> tuple[float, float]:
-    """The two numbers of an action, refusing a wrong shape or a non-finite value: a NaN let through
-    would silently corrupt the robot's pose and every observation after it."""
+    """The two numbers of an action, refusing a wrong shape, anything but numbers (a string such as
+    "05" would otherwise read as two digits) or a non-finite value: a NaN let through would
+    silently corrupt the robot's pose and every observation after it."""
     array = isinstance(action, np.ndarray)
-    shape = action.shape if array else np.shape(action)
-    if shape != (2,):
-        raise ValueError(f"action {quote(action)}: expected shape (2,) with values in [-1, 1], got shape {shape}")
     try:
-        first, second = action.tolist() if array else action  # tolist: the fast path for arrays
+        shape = action.shape if array else None if isinstance(action, (str, bytes)) else np.shape(action)
+    except ValueError:  # numpy refuses a ragged sequence such as [1, [2, 3]]
+        shape = None
+    if shape != (2,):
+        raise ValueError(f"action {quote(action)}: expected shape (2,) with values in [-1, 1], got "
+                         f"{'a ' + type(action).__name__ if shape is None else f'shape {shape}'}")
+    first, second = action.tolist() if array else action  # tolist: the fast path for arrays
+    # An array of floats or integers holds numbers; any other dtype, or a sequence, is checked value by value.
+    if not (array and action.dtype.kind in "fiu") and not (_is_number(first) and _is_number(second)):
+        raise ValueError(f"action {quote(action)}: expected two numbers in [-1, 1]")
+    try:
         a0, a1 = float(first), float(second)
-    except (TypeError, ValueError):
-        raise ValueError(f"action {quote(action)}: expected two numbers in [-1, 1]") from None
+    except OverflowError:  # an integer beyond any float
+        a0 = a1 = math.inf
     if not (math.isfinite(a0) and math.isfinite(a1)):
         raise ValueError(f"action {quote(action)}: expected finite numbers in [-1, 1] (NaN and inf are refused)")
     return a0, a1

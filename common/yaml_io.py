@@ -5,6 +5,7 @@ PyYAML's safe loader (no tags that build Python objects) it refuses, each as a o
 :class:`ConfigError`:
 
 * files over :data:`MAX_BYTES`;
+* control characters, in the text (a binary file, say) or escaped in a value (``"\\0"``);
 * nesting deeper than :data:`MAX_DEPTH` (PyYAML's composer recurses and would overflow);
 * documents whose aliases would expand past :data:`MAX_NODES` values (a "billion laughs" file is
   a few hundred bytes that anything walking the data, a validator or an error message, expands
@@ -23,6 +24,7 @@ from common.errors import ConfigError
 MAX_BYTES = 2 * 1024 * 1024
 MAX_DEPTH = 48
 MAX_NODES = 200_000
+_CONTROL = yaml.reader.Reader.NON_PRINTABLE  # what YAML refuses in a file's text
 
 
 class _Refused(Exception):
@@ -63,7 +65,9 @@ def _check_expansion(root: yaml.Node) -> None:
     """Count the values the node graph expands to (aliases followed), without expanding it.
 
     A node reached through several aliases is counted once per path, with its size memoised, so
-    the count is exact and the walk linear in the number of distinct nodes. A cycle is refused.
+    the count is exact and the walk linear in the number of distinct nodes. A cycle is refused, and
+    so is a value escaping a control character the reader refuses in the text (``"\\0"``): no
+    field holds one, and a NUL in a path is a ValueError deep inside whatever opens it.
     """
     size: dict[int, int] = {}
     depth: dict[int, int] = {}
@@ -74,6 +78,8 @@ def _check_expansion(root: yaml.Node) -> None:
         key = id(node)
         if done:
             on_path.discard(key)
+            if isinstance(node, yaml.ScalarNode) and (control := _CONTROL.search(node.value)):
+                raise _Refused(f"a value holds the control character #x{ord(control.group()):02x}", node.start_mark)
             children = _children(node)
             size[key] = 1 + sum(size[id(c)] for c in children)
             depth[key] = 1 + max((depth[id(c)] for c in children), default=0)
@@ -95,7 +101,13 @@ def parse_yaml(text: str, source: str | Path | None = None) -> Any:
     """Parse YAML text within the bounds above; every failure is a one-line :class:`ConfigError`."""
     if len(text) > MAX_BYTES:
         raise ConfigError(source, None, f"larger than {MAX_BYTES // 1024 // 1024} MiB; allowed: smaller YAML files")
-    loader = _BoundedLoader(text)
+    try:
+        # PyYAML's reader checks the whole text for control characters as the loader is built.
+        loader = _BoundedLoader(text)
+    except yaml.reader.ReaderError as exc:
+        line = text.count("\n", 0, exc.position) + 1
+        problem = f"holds the control character #x{exc.character:02x}, as a binary file does; expected a text YAML file"
+        raise ConfigError(source, f"line {line}", problem) from None
     try:
         node = loader.get_single_node()
         if node is None:

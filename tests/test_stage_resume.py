@@ -1,0 +1,54 @@
+"""A stage resumed from its checkpoint goes on as that stage: the policies it writes after the
+resume carry its own stage index and seed."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from common.curriculum.policy_file import read_manifest
+from common.curriculum.runner import Runner
+from common.curriculum.schema import CurriculumConfig, curriculum_from_mapping
+
+TINY = Path(__file__).parent / "data" / "tiny_curriculum.yaml"
+SEED = 7
+
+
+class _Interrupted(Exception):
+    """Raised where a killed run would have died: after a checkpoint of the second stage."""
+
+
+def _config() -> CurriculumConfig:
+    """The tiny curriculum cut to one evaluation in its first stage and two in its second. Its four
+    envs per stage matter: the shadowing bug this guards against left the stage index at the last
+    env's index (3), which no two-env curriculum would tell from stage 1."""
+    data = yaml.safe_load(TINY.read_text())
+    data["seed"] = SEED
+    for stage, budget in zip(data["stages"], (512, 1024)):
+        assert stage["n_envs"] == 4
+        stage.update(budget=budget, max_steps=40, eval={"suite": "open", "episodes": 2, "every": 512})
+    return curriculum_from_mapping(data, TINY)
+
+
+def test_a_resumed_second_stage_writes_its_own_stage_index_and_seed(tmp_path):
+    config, out = _config(), tmp_path / "run"
+
+    def interrupt(row: dict) -> None:
+        if row["stage"] == "sparse":
+            raise _Interrupted
+
+    with pytest.raises(_Interrupted):
+        Runner(config, out, progress=False, on_evaluation=interrupt).run()
+    stage = out / "stages" / "1-sparse"
+    assert read_manifest(stage / "checkpoints" / "last.zip")["timesteps"] == 512
+    assert not (stage / "policy.zip").exists()
+
+    Runner(config, out, resume=True, progress=False).run()
+    last = read_manifest(stage / "checkpoints" / "last.zip")
+    assert last["timesteps"] == 1024  # written after the resume
+    assert len(last["env_rng"]) == 4  # the resume restored each env's generator from it
+    for name in ("checkpoints/last.zip", "best.zip", "policy.zip"):
+        manifest = read_manifest(stage / name)
+        assert (manifest["stage"], manifest["stage_index"], manifest["seed"]) == ("sparse", 1, SEED + 1), name
