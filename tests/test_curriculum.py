@@ -197,7 +197,7 @@ def test_resume_refuses_a_changed_or_missing_run(tmp_path, capsys):
     (tmp_path / "full").mkdir()
     (tmp_path / "full" / "something").write_text("x")
     assert main(["run", str(TINY), "--out", str(tmp_path / "full")]) == 2
-    assert "not empty" in capsys.readouterr().err
+    assert "not empty and not a run directory of this project" in capsys.readouterr().err
 
 
 def _evaluate(agent, count: int = 20) -> float:

@@ -10,6 +10,10 @@ Run directory::
     OUT/learning_curve.png   success rate and SPL against timesteps
     OUT/stages/I-NAME/       checkpoints/last.zip (+ last_replay.npz), best.zip, policy.zip, tensorboard/
     OUT/.lock                held while a run works in the directory
+    OUT/.nav-curriculum-run  the run's mark, written before anything else
+
+Only a directory that holds the mark is this project's: a run may clear what an interrupted run of
+its own left behind, and never touches a directory that is not empty and not marked.
 """
 
 from __future__ import annotations
@@ -21,8 +25,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from common.atomic import atomic_write
+from common.errors import ConfigError
 
 LOCK_NAME = ".lock"
+MARKER = ".nav-curriculum-run"
 _PREPARED = {"config.yaml", "run.json", "state.json", "eval.csv"}  # what a run writes before training
 EVAL_FIELDS = ["stage", "timesteps", "wall_time", "success_rate", "collision_rate", "timeout_rate", "stuck_rate",
                "spl", "mean_steps"]
@@ -96,9 +102,34 @@ class EvalLog:
             handle.flush()
 
 
+def is_marked(out: Path) -> bool:
+    """Whether ``out`` is a run directory of this project (it holds the mark)."""
+    return (out / MARKER).is_file()
+
+
+def mark(out: Path) -> None:
+    """Mark ``out`` as a run directory, atomically (a kill leaves it marked or not, never half)."""
+    atomic_write(out / MARKER, lambda tmp: tmp.write_text(json.dumps({"format": 1}) + "\n"))
+
+
+def check_claimable(out: Path, resume: bool) -> None:
+    """Refuse, before anything is written, an ``out`` that is not a directory, or one that holds
+    files and is not marked (a run of an older version, unmarked, may still be resumed)."""
+    if out.exists() and not out.is_dir():
+        raise ConfigError(out, None, "is not a directory; --out names a run directory")
+    if not out.is_dir() or is_marked(out):
+        return
+    if any(p.name != LOCK_NAME for p in out.iterdir()) and not (resume and (out / "state.json").is_file()):
+        raise ConfigError(out, None, "is not empty and not a run directory of this project (it has no "
+                          f"{MARKER}); choose an empty or a new --out (nothing was changed)")
+
+
 def unstarted(out: Path) -> bool:
-    """Whether ``out`` holds only what a run writes before its first checkpoint (and at least that)."""
-    names = {p.name for p in out.iterdir()} - {LOCK_NAME}
+    """Whether ``out`` is a marked run directory holding only what a run writes before its first
+    checkpoint (and at least that)."""
+    if not is_marked(out):
+        return False
+    names = {p.name for p in out.iterdir()} - {LOCK_NAME, MARKER}
     if not names or not names - {"stages"} <= _PREPARED or not (out / "state.json").exists():
         return False
     if (out / "eval.csv").exists() and len((out / "eval.csv").read_text().splitlines()) > 1:

@@ -29,7 +29,8 @@ from common.curriculum.hyperparams import resolve_hyperparams
 from common.curriculum.policy import PolicyAgent, algorithm_class, load_weights, vec_env_class
 from common.curriculum.policy_file import Normalizer, update_manifest
 from common.curriculum.replay import load_replay
-from common.curriculum.run_directory import LOCK_NAME, EvalLog, StagePaths, clear_unstarted, unstarted, write_json
+from common.curriculum.run_directory import (LOCK_NAME, MARKER, EvalLog, StagePaths, check_claimable, clear_unstarted,
+                                             is_marked, mark, unstarted, write_json)
 from common.curriculum.schema import CurriculumConfig, StageSpec
 from common.curriculum.stage import TEST_SEED_SHIFT, stage_radius, stage_scenarios
 from common.errors import ConfigError
@@ -101,12 +102,15 @@ class Runner:
         state_path = self.out / "state.json"
         if self.resume and not state_path.exists():
             raise ConfigError(self.out, None, "nothing to resume here (no state.json); run without --resume")
-        self.out.mkdir(parents=True, exist_ok=True)
+        check_claimable(self.out, self.resume)
         self._lock = FileLock(self.out / LOCK_NAME)
         try:
+            self.out.mkdir(parents=True, exist_ok=True)
             self._lock.acquire(timeout=0)
         except Timeout:
             raise ConfigError(self.out, None, "another run is using this directory; wait for it to finish or choose another --out") from None
+        except OSError as error:
+            raise ConfigError(self.out, None, f"cannot write here ({error.strerror}); choose another --out") from None
         try:
             return self._open()
         except BaseException:
@@ -115,6 +119,8 @@ class Runner:
 
     def _open(self) -> dict:
         state_path = self.out / "state.json"
+        if not is_marked(self.out):
+            mark(self.out)  # before anything else is written
         fresh = unstarted(self.out)
         if fresh:
             # A run that died before its first checkpoint (say, a missing dependency) left only
@@ -126,7 +132,7 @@ class Runner:
                 raise ConfigError(self.out, "config.yaml", "the curriculum changed since this run started; resume it with the same file")
             state = json.loads(state_path.read_text())
         else:
-            if any(p.name != LOCK_NAME for p in self.out.iterdir()):
+            if any(p.name not in (LOCK_NAME, MARKER) for p in self.out.iterdir()):
                 raise ConfigError(self.out, None, "the run directory is not empty; pass --resume to continue it or choose another --out")
             atomic_write(self.out / "config.yaml",
                          lambda tmp: tmp.write_text(yaml.safe_dump(self.config.model_dump(mode="json"), sort_keys=False)))
