@@ -112,14 +112,14 @@ def mark(out: Path) -> None:
     atomic_write(out / MARKER, lambda tmp: tmp.write_text(json.dumps({"format": 1}) + "\n"))
 
 
-def check_claimable(out: Path, resume: bool) -> None:
+def check_claimable(out: Path) -> None:
     """Refuse, before anything is written, an ``out`` that is not a directory, or one that holds
-    files and is not marked (a run of an older version, unmarked, may still be resumed)."""
+    files and is not marked (resuming or not: whatever its files are called, they are not a run's)."""
     if out.exists() and not out.is_dir():
         raise ConfigError(out, None, "is not a directory; --out names a run directory")
     if not out.is_dir() or is_marked(out):
         return
-    if any(p.name != LOCK_NAME for p in out.iterdir()) and not (resume and (out / "state.json").is_file()):
+    if any(p.name != LOCK_NAME for p in out.iterdir()):
         raise ConfigError(out, None, "is not empty and not a run directory of this project (it has no "
                           f"{MARKER}); choose an empty or a new --out (nothing was changed)")
 

@@ -102,7 +102,7 @@ class Runner:
         state_path = self.out / "state.json"
         if self.resume and not state_path.exists():
             raise ConfigError(self.out, None, "nothing to resume here (no state.json); run without --resume")
-        check_claimable(self.out, self.resume)
+        check_claimable(self.out)
         self._lock = FileLock(self.out / LOCK_NAME)
         try:
             self.out.mkdir(parents=True, exist_ok=True)

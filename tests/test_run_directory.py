@@ -1,0 +1,61 @@
+"""A run directory is the project's only when it carries the run's mark: nothing of a user's is
+ever cleared or overwritten, and a bad --out is one line."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from common.curriculum.cli import main
+from common.curriculum.run_directory import MARKER
+from common.curriculum.runner import Runner
+from common.curriculum.schema import load_curriculum
+
+ROOT = Path(__file__).resolve().parents[1]
+TINY = ROOT / "tests/data/tiny_curriculum.yaml"
+
+
+def _tree(directory: Path) -> dict[str, bytes | None]:
+    return {str(p.relative_to(directory)): p.read_bytes() if p.is_file() else None for p in directory.rglob("*")}
+
+
+def test_a_users_files_named_as_a_runs_are_left_alone(tmp_path, capsys):
+    # The names an unstarted run leaves, written by a user: they are not a run's.
+    out = tmp_path / "d"
+    (out / "stages" / "x" / "tensorboard").mkdir(parents=True)
+    (out / "config.yaml").write_text("my\n")
+    (out / "state.json").write_text("{}\n")
+    (out / "stages" / "x" / "tensorboard" / "ev").write_text("log\n")
+    before = _tree(out)
+    for resume in ([], ["--resume"]):
+        assert main(["run", str(TINY), "--out", str(out), "--no-progress", *resume]) == 2
+        error = capsys.readouterr().err
+        assert error.count("\n") == 1 and "not a run directory of this project" in error
+        assert _tree(out) == before  # not a file deleted, changed or added (not even the lock)
+
+
+def test_a_run_marks_its_directory_before_anything_else_and_restarts_only_its_own(tmp_path):
+    config, out = load_curriculum(TINY), tmp_path / "run"
+    first = Runner(config, out)
+    first.prepare()
+    assert (out / MARKER).is_file()
+    first.release()  # it died before its first checkpoint: its own leftovers may be cleared
+    again = Runner(config, out)
+    assert again.prepare() == {"done": [], "stages": {}}
+    again.release()
+    (out / MARKER).unlink()  # the same files, unmarked: no longer provably the run's
+    with pytest.raises(Exception, match="not a run directory of this project"):
+        Runner(config, out).prepare()
+
+
+@pytest.mark.parametrize("make_out, expected", [
+    (lambda tmp: tmp / "a-file", "is not a directory"),
+    (lambda tmp: tmp / "a-file" / "run", "cannot write here"),
+])
+def test_an_out_that_cannot_be_a_run_directory_is_one_line(tmp_path, capsys, make_out, expected):
+    (tmp_path / "a-file").write_text("mine\n")
+    assert main(["run", str(TINY), "--out", str(make_out(tmp_path)), "--no-progress"]) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and expected in error and "Traceback" not in error
+    assert (tmp_path / "a-file").read_text() == "mine\n"
