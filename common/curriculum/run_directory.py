@@ -125,10 +125,8 @@ def check_claimable(out: Path) -> None:
 
 
 def unstarted(out: Path) -> bool:
-    """Whether ``out`` is a marked run directory holding only what a run writes before its first
-    checkpoint (and at least that)."""
-    if not is_marked(out):
-        return False
+    """Whether the run directory ``out`` (marked: :func:`check_claimable` let nothing else through)
+    holds only what a run writes before its first checkpoint (and at least that)."""
     names = {p.name for p in out.iterdir()} - {LOCK_NAME, MARKER}
     if not names or not names - {"stages"} <= _PREPARED or not (out / "state.json").exists():
         return False
