@@ -66,6 +66,7 @@ class NavigationEnv(gym.Env):
         self.observation_space = self.layout.space
         self._readings: Readings | None = None
         self._pending_rng: dict | None = None
+        self._closed = False
         self.trajectory: list[tuple[float, float]] = []
 
     @property
@@ -99,6 +100,8 @@ class NavigationEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
         """Start an episode; ``options={"resample": True}`` redraws a random world file's layout
         (IR-SIM's ``reset(random=True)``) where a plain reset restores its initial state."""
+        if self._closed:
+            raise gym.error.ClosedEnvironmentError("reset() on a closed env; make a new one")
         super().reset(seed=seed)
         if self._pending_rng is not None:
             self.np_random.bit_generator.state, self._pending_rng = self._pending_rng, None
@@ -116,6 +119,8 @@ class NavigationEnv(gym.Env):
         return self.layout(self._readings, self._goal), info
 
     def step(self, action) -> tuple[np.ndarray, float, bool, bool, dict]:
+        if self._closed:
+            raise gym.error.ClosedEnvironmentError("step() on a closed env; make a new one")
         v, w = self.actions.to_velocity(action)
         readings = self._readings = self.world.step(v, w)
         task, previous = self.task, self.task.distance
@@ -132,6 +137,11 @@ class NavigationEnv(gym.Env):
         if self.render_mode == "human":
             self.render()
         return self.layout(readings, self._goal), float(reward), terminated, truncated, info
+
+    def close(self) -> None:
+        """Release the world; ``step`` and ``reset`` refuse after this, in both tiers alike."""
+        self._closed = True
+        super().close()
 
     def rng_state(self) -> dict:
         """The state of the env's random generator (JSON-able): what the next reset will draw from."""

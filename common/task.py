@@ -15,6 +15,7 @@ and is judged by the smallest: :func:`judged_radius`).
 from __future__ import annotations
 
 import math
+import numbers
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -25,6 +26,7 @@ from common.scenario import MAX_LENGTH, Scenario
 
 OUTCOMES = ("success", "collision", "timeout", "stuck")
 DEFAULT_MAX_STEPS = 500
+MAX_STEPS = 1_000_000
 STUCK_WINDOW = 100  # steps
 STUCK_DISTANCE = 0.1  # m: an agent that moved less than this over the window is stuck
 
@@ -66,6 +68,8 @@ class Task:
     def __init__(self, goal_threshold: GoalThreshold = None, max_steps: int = DEFAULT_MAX_STEPS,
                  judge_stuck: bool = False) -> None:
         self.threshold = threshold_range(goal_threshold)
+        if isinstance(max_steps, bool) or not isinstance(max_steps, numbers.Integral) or not 1 <= max_steps <= MAX_STEPS:
+            raise ConfigError(None, "max_steps", f"got {quote(max_steps)}; allowed: a whole number of steps from 1 to {MAX_STEPS:,}")
         self.max_steps = int(max_steps)
         self.judge_stuck = judge_stuck
         self.goal, self.radius = (0.0, 0.0), 0.0

@@ -95,3 +95,4 @@ class NavEnv(NavigationEnv):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+        super().close()

@@ -137,3 +137,4 @@ class WarehouseNavEnv(NavigationEnv):
         if self.world is not None:
             self.world.close()
             self.world = None
+        super().close()

@@ -182,6 +182,7 @@ def test_run_writes_every_artefact_and_resumes_after_kill(tmp_path, monkeypatch)
     resumed = _run(killed, "--resume", "--no-progress")
     assert resumed.wait(timeout=300) == 0, resumed.stdout.read()
     assert _shape(killed) == _shape(whole)
+
     assert read_manifest(killed / "stages/1-sparse/policy.zip")["git_commit"] == "commit-at-start"
     rows = list(csv.DictReader((killed / "eval.csv").open()))
     assert (killed / "eval.csv").read_text().startswith(before.splitlines()[0])
@@ -361,3 +362,22 @@ def test_a_stage_is_evaluated_within_its_own_goal_radius():
     config = curriculum_from_mapping(_with({}, {"env_kwargs": {"goal_threshold": [0.12, 0.5]}}), "c.yaml")
     assert stage_radius(config.stages[0]) == 0.12
     assert stage_radius(config.stages[1]) is None  # each scenario's own
+
+
+def test_a_resumed_stage_logs_each_tensorboard_step_once(tmp_path):
+    # A run killed after logging past its checkpoint logs those steps again when resumed from it.
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+    from torch.utils.tensorboard import SummaryWriter
+
+    from common.curriculum.runner import _purge_tensorboard_after
+
+    def log(steps: range) -> None:
+        with SummaryWriter(str(tmp_path / "open_1")) as writer:
+            for step in steps:
+                writer.add_scalar("time/fps", float(step), step)
+
+    log(range(1, 11))  # killed at step 10, its last checkpoint at step 5
+    _purge_tensorboard_after(tmp_path, "open", 5)
+    log(range(5, 13))  # the resumed run, from the checkpoint on
+    steps = [event.step for event in EventAccumulator(str(tmp_path / "open_1")).Reload().Scalars("time/fps")]
+    assert steps == list(range(1, 13))

@@ -59,3 +59,19 @@ def test_an_out_that_cannot_be_a_run_directory_is_one_line(tmp_path, capsys, mak
     error = capsys.readouterr().err
     assert error.count("\n") == 1 and expected in error and "Traceback" not in error
     assert (tmp_path / "a-file").read_text() == "mine\n"
+
+
+def test_the_csv_files_end_every_line_alike(tmp_path):
+    from common.curriculum.comparison import write_csv
+    from common.curriculum.run_directory import EvalLog
+    from common.evaluation import Episode, summarise
+
+    log = EvalLog(tmp_path / "eval.csv")
+    log.append({"stage": "open", "timesteps": 1024, "wall_time": 1.0, "success_rate": 0.5})
+    log.truncate("open", 2048)
+    log.append({"stage": "open", "timesteps": 2048, "wall_time": 2.0, "success_rate": 0.75})
+    episode = Episode("a", "s", 0, "success", 10, 1.0, 1.0, 1.0, 0.1)
+    written = write_csv([summarise("a", [episode, episode])], tmp_path / "episodes.csv")
+    for path in (tmp_path / "eval.csv", written):
+        data = path.read_bytes()
+        assert b"\r" not in data and data.count(b"\n") == 3, path.name

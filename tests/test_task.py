@@ -113,3 +113,22 @@ def test_arriving_and_touching_on_the_same_step_counts_as_arriving():
     arrived = Readings(pose=(6.9, 5.0, 0.0), velocity=start.velocity, odometry=start.odometry, lidar=start.lidar,
                        imu=start.imu, collided=True, time=0.1)
     assert task.step(arrived) == "success"
+
+
+@pytest.mark.parametrize("max_steps", [0, -5, 1.5, True, "300", 10**7])
+def test_max_steps_is_a_positive_whole_number(max_steps):
+    with pytest.raises(ConfigError, match="max_steps: got .*; allowed: a whole number of steps from 1 to 1,000,000"):
+        gym.make("flatland/Nav-v0", world=OPEN, max_steps=max_steps)
+    assert Task(max_steps=np.int64(7)).max_steps == 7
+
+
+@pytest.mark.parametrize("env_id", ["flatland/Nav-v0", "physics3d/WarehouseNav-v0"])
+def test_a_closed_env_refuses_to_step_or_reset_in_both_tiers(env_id):
+    import physics3d  # noqa: F401  (registers the 3D env)
+
+    env = gym.make(env_id, world="open")
+    env.reset(seed=0)
+    env.close()
+    for call in (lambda: env.step(env.action_space.sample()), lambda: env.reset(seed=1)):
+        with pytest.raises(gym.error.ClosedEnvironmentError, match="closed env"):
+            call()

@@ -41,7 +41,7 @@ def write_csv(summaries: Sequence[Summary], path: str | Path) -> Path:
     path = Path(path)
     rows = episodes_as_dicts(summaries)
     with path.open("w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]) if rows else ["agent"])
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]) if rows else ["agent"], lineterminator="\n")
         writer.writeheader()
         writer.writerows(rows)
     return path

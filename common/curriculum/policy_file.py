@@ -32,6 +32,7 @@ from common.atomic import atomic_write
 from common.curriculum.hyperparams import PolicyKwargs
 from common.errors import ConfigError
 from common.observations import LAYOUTS
+from common.task import MAX_STEPS
 
 MANIFEST = "nav_manifest.json"
 NORMALIZER = "nav_normalizer.json"
@@ -53,7 +54,7 @@ class Manifest(BaseModel):
     observation: Literal[LAYOUTS]  # type: ignore[valid-type]
     goal_distance_scale: Annotated[float, Field(gt=0.0, le=1000.0)]
     action_mapping: Literal[MAPPINGS] = "linear"  # type: ignore[valid-type]
-    max_steps: Annotated[int, Field(ge=1, le=1_000_000)] = 500
+    max_steps: Annotated[int, Field(ge=1, le=MAX_STEPS)] = 500
     policy_kwargs: PolicyKwargs = PolicyKwargs()
     use_sde: bool = False
     timesteps: Annotated[int, Field(ge=0)] = 0

@@ -90,7 +90,7 @@ class EvalLog:
 
         def write(tmp: Path) -> None:
             with tmp.open("w", newline="") as handle:
-                writer = csv.DictWriter(handle, fieldnames=EVAL_FIELDS)
+                writer = csv.DictWriter(handle, fieldnames=EVAL_FIELDS, lineterminator="\n")
                 writer.writeheader()
                 writer.writerows(keep)
 
@@ -98,7 +98,7 @@ class EvalLog:
 
     def append(self, row: dict) -> None:
         with self.path.open("a", newline="") as handle:
-            csv.DictWriter(handle, fieldnames=EVAL_FIELDS).writerow(row)
+            csv.DictWriter(handle, fieldnames=EVAL_FIELDS, lineterminator="\n").writerow(row)
             handle.flush()
 
 

@@ -71,6 +71,17 @@ def _make_env_kwargs(stage: StageSpec) -> dict:
                 difficulty=spec.difficulty, action_mapping=stage.action_mapping, **stage.env_kwargs)
 
 
+def _purge_tensorboard_after(log_dir: Path, run_name: str, step: int) -> None:
+    """Hide the TensorBoard points an interrupted run logged past ``step`` (the checkpoint a resume
+    continues from, and so logs again): TensorBoard's purge marker, in the run folder SB3 continues."""
+    from stable_baselines3.common.utils import get_latest_run_id
+    from torch.utils.tensorboard import SummaryWriter
+
+    latest = get_latest_run_id(str(log_dir), run_name)
+    if latest:
+        SummaryWriter(str(log_dir / f"{run_name}_{latest}"), purge_step=step).close()
+
+
 def _env_class(stage: StageSpec) -> type:
     """The env class of a stage's tier. make_vec_env gets the class, not a registered id: a subprocess
     env unpickles the class by its module, which imports (and registers) the tier, where an id
@@ -223,6 +234,8 @@ class Runner:
                     venv.env_method("restore_rng", env_state, indices=[env_index])
         already = int(model.num_timesteps)
         self.eval_log.truncate(stage.name, already)
+        if resuming:
+            _purge_tensorboard_after(paths.tensorboard, stage.name, already)
         callback = CurriculumCallback(self, index, stage, paths)
         start = time.perf_counter()
         remaining = max(0, stage.budget - already)

@@ -44,6 +44,7 @@ from common.observations import LAYOUTS
 from common.rewards import resolve_reward_spec
 from common.scenario import RobotProfile, pydantic_error
 from common.sources import scenario_source
+from common.task import MAX_STEPS
 from common.tiers import TIERS, generator_template
 from common.yaml_io import read_yaml_mapping
 
@@ -103,7 +104,7 @@ class StageSpec(_Strict):
     observation: Literal[LAYOUTS] = "lidar43"  # type: ignore[valid-type]
     action_mapping: Literal[MAPPINGS] = "linear"  # type: ignore[valid-type]
     reward: str | dict[str, Any] = "default"
-    max_steps: Annotated[int, Field(ge=1)] = 500
+    max_steps: Annotated[int, Field(ge=1, le=MAX_STEPS)] = 500
     algorithm: Literal[ALGORITHMS] = "ppo"  # type: ignore[valid-type]
     hyperparams: dict[str, Any] = {}
     n_envs: Annotated[int, Field(ge=1, le=256)] = 8
