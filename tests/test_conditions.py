@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -160,3 +161,20 @@ def test_each_tier_generates_around_its_own_template_and_an_unknown_tier_is_refu
     assert gym.make("physics3d/WarehouseNav-v0").unwrapped.source.template.name == TEMPLATE.name
     with pytest.raises(ConfigError, match="unknown tier 'mars'; allowed: flatland, physics3d"):
         generator_template("mars")
+
+
+def test_the_docs_table_lists_every_knob_with_its_physics3d_default():
+    # The knob table in docs/envs.md is what users read: a new knob or a changed default must show there.
+    import re
+
+    import yaml
+
+    from common.conditions import CONDITION_KEYS, TIER_DEFAULTS
+
+    text = (Path(__file__).resolve().parents[1] / "docs/envs.md").read_text()
+    section = text.split("## Conditions", 1)[1].split("\n## ", 1)[0]
+    rows = {m.group(1): m.group(2).strip() for m in re.finditer(r"^\| `(\w+)` \|.*\| ([^|]+) \|$", section, re.M)}
+    assert set(rows) == set(CONDITION_KEYS)
+    for knob, default in TIER_DEFAULTS["physics3d"].items():
+        documented = yaml.safe_load(rows[knob].strip("`"))
+        assert documented == (list(default) if isinstance(default, tuple) else default), knob
