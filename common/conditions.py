@@ -159,6 +159,11 @@ class Conditions(BaseModel):
         if self.odometry_noise is not None and self.odometry_noise != robot.encoder_noise:
             robot = robot.model_copy(update={"encoder_noise": self.odometry_noise})
         if robot is not scenario.robot and robot != scenario.robot:
+            world = scenario.world
+            if 2.0 * robot.bounding_radius >= min(world.width, world.height):
+                raise ConfigError(None, "robot", f"{2 * robot.bounding_radius:g} m across, it does not fit in the "
+                                  f"{world.width:g} x {world.height:g} m world of {scenario.name}; allowed: a robot "
+                                  "narrower than its world")
             update["robot"] = robot
         if self.lidar_noise is not None and self.lidar_noise != scenario.lidar.noise_std:
             update["lidar"] = scenario.lidar.model_copy(update={"noise_std": self.lidar_noise})

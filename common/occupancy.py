@@ -62,6 +62,15 @@ class OccupancyGrid:
         return labels == label if label else np.zeros_like(self.occupied)
 
 
+MAX_CELLS = 4_000_000  # a grid's cells at most: 2,000 x 2,000, about 40 MB for an A* search's arrays
+
+
+def bounded_resolution(width: float, height: float, resolution: float) -> float:
+    """``resolution``, coarsened where a world is so large that its grid would pass :data:`MAX_CELLS`
+    (a 1 km world is planned at 0.5 m): what a grid costs is bounded by the world's meaning."""
+    return max(resolution, math.sqrt(width * height / MAX_CELLS))
+
+
 def scenario_grid(scenario: Scenario, resolution: float = 0.2, inflation: float | None = None) -> OccupancyGrid:
     """The ground-truth grid of a scenario: a cell is occupied when its centre lies within
     ``inflation`` (default: the robot's bounding radius) of an obstacle or of a boundary wall."""
@@ -81,7 +90,7 @@ def scenario_grid(scenario: Scenario, resolution: float = 0.2, inflation: float 
             others.append(obstacle)
     grid = shapes_grid(scenario.world, np.array(kinds, dtype=np.int64), np.array(params, dtype=float).reshape(-1, 5),
                        resolution, inflation)
-    x0, y0 = grid.origin
+    (x0, y0), resolution = grid.origin, grid.resolution
     rows, cols = grid.occupied.shape
     for obstacle in others:
         x_min, y_min, x_max, y_max = obstacle.bounds()
@@ -96,7 +105,9 @@ def scenario_grid(scenario: Scenario, resolution: float = 0.2, inflation: float 
 def shapes_grid(world: WorldSpec, kinds: np.ndarray, params: np.ndarray, resolution: float,
                 inflation: float) -> OccupancyGrid:
     """The grid of circles and boxes given as kinds and parameters (see :mod:`common.placement`)
-    in ``world``, with its boundary walls if it has them, inflated as :func:`scenario_grid` does."""
+    in ``world``, with its boundary walls if it has them, inflated as :func:`scenario_grid` does
+    (at :func:`bounded_resolution`)."""
+    resolution = bounded_resolution(world.width, world.height, resolution)
     cols = max(1, int(round(world.width / resolution)))
     rows = max(1, int(round(world.height / resolution)))
     occupied = np.zeros((rows, cols), dtype=bool)
@@ -246,7 +257,7 @@ class ScanMapper:
                  inflation: float = 0.0) -> None:
         x0, y0, width, height = world_bounds
         self.origin = (float(x0), float(y0))
-        self.resolution = float(resolution)
+        self.resolution = resolution = bounded_resolution(width, height, float(resolution))
         self.inflation = float(inflation)
         self.shape = (max(1, int(round(height / resolution))), max(1, int(round(width / resolution))))
         self.hits = np.zeros(self.shape, dtype=np.int32)

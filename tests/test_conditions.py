@@ -178,3 +178,11 @@ def test_the_docs_table_lists_every_knob_with_its_physics3d_default():
     for knob, default in TIER_DEFAULTS["physics3d"].items():
         documented = yaml.safe_load(rows[knob].strip("`"))
         assert documented == (list(default) if isinstance(default, tuple) else default), knob
+
+
+def test_a_robot_that_does_not_fit_its_world_is_refused_in_one_line():
+    from common.curriculum.cli import main
+
+    with pytest.raises(ConfigError, match=r"robot: 1998 m across, it does not fit in the 10 x 10 m world"):
+        Conditions(robot={"radius": 999}).scenario(Scenario())
+    assert main(["compare", "--controllers", "go_to_goal", "--episodes", "1", "--env-kwargs", "robot:{radius: 999}"]) == 2

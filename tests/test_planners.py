@@ -281,3 +281,17 @@ def test_line_of_sight_catches_corner_clips_that_sampling_misses():
     assert not line_of_sight(*args, 0.5, 2.5, 1.5, 1.5)  # exactly through the corner: no cutting
     assert line_of_sight(*args, 0.5, 0.5, 3.5, 0.5)
     assert not line_of_sight(*args, 0.5, 0.5, 4.5, 0.5)  # leaves the grid
+
+
+def test_a_grid_of_a_huge_world_is_coarsened_to_a_bounded_size():
+    # A 69-byte scenario may ask for a 1 km world: at 0.1 m its grid alone would take gigabytes.
+    from common.occupancy import MAX_CELLS, ScanMapper, scenario_grid
+    from common.scenario import CircleObstacle, Scenario, WorldSpec
+
+    huge = Scenario(world=WorldSpec(width=1000.0, height=1000.0), start=(1.0, 1.0, 0.0), goal=(9.0, 9.0),
+                    obstacles=[CircleObstacle(x=500.0, y=500.0, radius=5.0)])
+    grid = scenario_grid(huge, 0.1)
+    assert grid.occupied.size <= MAX_CELLS and grid.resolution == pytest.approx(0.5)
+    assert grid.occupied[1000, 1000] and not grid.occupied[100, 100]  # the obstacle still drawn, the rest free
+    assert ScanMapper.for_scenario(huge, 0.1).hits.size <= MAX_CELLS
+    assert scenario_grid(Scenario(), 0.1).resolution == 0.1  # ordinary worlds keep their resolution

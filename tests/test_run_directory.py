@@ -75,3 +75,60 @@ def test_the_csv_files_end_every_line_alike(tmp_path):
     for path in (tmp_path / "eval.csv", written):
         data = path.read_bytes()
         assert b"\r" not in data and data.count(b"\n") == 3, path.name
+
+
+def test_a_row_torn_by_a_kill_is_dropped_when_the_log_is_reopened(tmp_path):
+    from common.curriculum.run_directory import EvalLog
+
+    log = EvalLog(tmp_path / "eval.csv")
+    log.append({"stage": "sparse", "timesteps": 1024, "wall_time": 1.0, "success_rate": 0.5})
+    with (tmp_path / "eval.csv").open("a") as handle:
+        handle.write("spars")  # killed mid-append
+    reopened = EvalLog(tmp_path / "eval.csv")
+    assert [r["timesteps"] for r in reopened.rows()] == ["1024"]
+    reopened.truncate("sparse", 4096)
+    assert "spars," not in (tmp_path / "eval.csv").read_text()
+
+
+@pytest.mark.slow
+def test_a_full_disk_stops_a_run_in_one_line_and_it_resumes(tmp_path, capsys, monkeypatch):
+    import errno
+
+    from common.curriculum import training
+
+    out, saved = tmp_path / "run", training.save_policy
+    calls = []
+
+    def fills_the_disk(model, path, *args, **kwargs):
+        calls.append(path)
+        if len(calls) == 3:  # the second evaluation's best checkpoint
+            raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        return saved(model, path, *args, **kwargs)
+
+    monkeypatch.setattr(training, "save_policy", fills_the_disk)
+    assert main(["run", str(TINY), "--out", str(out), "--no-progress"]) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and "No space left on device" in error and "--resume" in error
+    monkeypatch.setattr(training, "save_policy", saved)
+    assert main(["run", str(TINY), "--out", str(out), "--no-progress", "--resume"]) == 0
+    assert (out / "report.md").exists()
+
+
+def test_compare_writes_only_into_a_directory_of_its_own(tmp_path, capsys):
+    theirs = tmp_path / "theirs"
+    theirs.mkdir()
+    (theirs / "notes.txt").write_text("mine\n")
+    argv = ["compare", "--controllers", "go_to_goal", "--episodes", "1", "--max-steps", "5"]
+    assert main([*argv, "--out", str(theirs)]) == 2
+    assert "holds files other than a comparison's" in capsys.readouterr().err
+    assert [p.name for p in theirs.iterdir()] == ["notes.txt"]
+    assert main([*argv, "--out", str(theirs / "notes.txt")]) == 2
+    assert "is not a directory" in capsys.readouterr().err
+    assert main([*argv, "--out", str(tmp_path / "mine")]) == 0
+    assert main([*argv, "--out", str(tmp_path / "mine")]) == 0  # an earlier comparison is replaced
+
+
+def test_render_to_a_directory_is_one_line(tmp_path, capsys):
+    assert main(["render", "--agent", "go_to_goal", "--max-steps", "5", "--out", str(tmp_path)]) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and str(tmp_path) in error

@@ -43,7 +43,11 @@ def _run(args: argparse.Namespace) -> int:
 
     config = load_curriculum(args.file)
     out = Path(args.out) if args.out else Path("runs") / config.name
-    state = Runner(config, out, resume=args.resume, device=args.device, progress=not args.no_progress).run()
+    try:
+        state = Runner(config, out, resume=args.resume, device=args.device, progress=not args.no_progress).run()
+    except OSError as error:
+        raise ConfigError(error.filename or out, None, f"{error.strerror or error}; every checkpoint written so far is "
+                          f"whole: once this is fixed, continue with --resume") from None
     for name, result in state["stages"].items():
         final = result["final"]
         print(f"{name}: {result['timesteps']:,} steps in {result['wall_seconds']:.0f} s; test success "
@@ -213,8 +217,7 @@ def _compare(args: argparse.Namespace) -> int:
     scenarios = _scenarios(args)
     radius, conditions = _judged(args, agents), _conditions(args, agents)
     source = Path(args.scenario_file).stem if args.scenario_file else args.suite
-    out = Path(args.out) if args.out else Path("runs") / "compare" / f"{args.world}-{source}"
-    out.mkdir(parents=True, exist_ok=True)
+    out = _compare_directory(Path(args.out) if args.out else Path("runs") / "compare" / f"{args.world}-{source}")
     _announce(args, f"{len(agents)} agents", len(scenarios), radius, conditions)
     with Progress(transient=True, console=_stderr_console()) as bar:
         task = bar.add_task(f"{source}: {len(agents)} agents x {len(scenarios)} episodes", total=len(agents) * len(scenarios))
@@ -234,6 +237,21 @@ def _compare(args: argparse.Namespace) -> int:
         print(table)
         print(f"written: {out}/comparison.md, episodes.csv, comparison.png" + "".join(f", {gif}" for gif in gifs))
     return 0
+
+
+COMPARE_FILES = ("comparison.md", "episodes.csv", "comparison.png")
+
+
+def _compare_directory(out: Path) -> Path:
+    """``--out`` of compare, created: new, empty, or holding only an earlier comparison (which it
+    replaces); anything else is refused before a file is written."""
+    if out.exists() and not out.is_dir():
+        raise ConfigError(out, None, "is not a directory; --out names the comparison's directory")
+    if out.is_dir() and any(p.name not in COMPARE_FILES for p in out.iterdir()):
+        raise ConfigError(out, None, f"holds files other than a comparison's ({', '.join(COMPARE_FILES)}); "
+                          "choose an empty or a new --out (nothing was changed)")
+    out.mkdir(parents=True, exist_ok=True)
+    return out
 
 
 def _conditions(args: argparse.Namespace, agents) -> "Conditions":
@@ -275,13 +293,16 @@ def _record(agent, scenario, args: argparse.Namespace, gif: Path, radius: float 
 def _render(args: argparse.Namespace) -> int:
     from flatland.render import plot_odometry_drift
 
+    gif = Path(args.out)
+    if gif.is_dir() or gif.suffix.lower() != ".gif":
+        raise ConfigError(gif, None, "--out names the GIF to write (FILE.gif), not a directory or another kind of file")
     agent = _agent(args.agent)
     _settle(args, [agent])
     scenario = _scenarios(args, count=args.index + 1)[args.index]
     radius, conditions = _judged(args, [agent]), _conditions(args, [agent])
     _announce(args, agent.name, 1, radius, conditions)
     scenario = conditions.for_tier(args.world).scenario(scenario)  # the robot and the encoders that drive
-    gif, episode, true_path, estimate = _record(agent, scenario, args, Path(args.out), radius, args.every)
+    gif, episode, true_path, estimate = _record(agent, scenario, args, gif, radius, args.every)
     print(f"{gif}: {agent.name} on {scenario.name}: {episode.outcome} after {episode.steps} steps, "
           f"{episode.path_length:.2f} m")
     if args.drift:
@@ -447,6 +468,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return args.handler(args)
     except ConfigError as error:
         print(f"error: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except OSError as error:
+        # The file system refused (a file where a directory should be, no permission, a full
+        # disk): the user's to fix, in one line. A run stopped so is resumable from its last checkpoint.
+        where = f"{error.filename}: " if error.filename else ""
+        print(f"error: {where}{error.strerror or error}", file=sys.stderr)
         return EXIT_BAD_INPUT
 
 

@@ -74,12 +74,16 @@ class StagePaths:
 
 class EvalLog:
     """``eval.csv``: rows appended and flushed as they come; on resume, rows newer than the
-    checkpoint being resumed are dropped (the run will evaluate those timesteps again)."""
+    checkpoint being resumed are dropped (the run will evaluate those timesteps again), and so is
+    a last row a kill tore mid-append (it lacks its line end)."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
-        if not path.exists():
-            atomic_write(path, lambda tmp: tmp.write_text(",".join(EVAL_FIELDS) + "\n"))
+        header = (",".join(EVAL_FIELDS) + "\n").encode()
+        data = path.read_bytes() if path.exists() else b""
+        if not data.endswith(b"\n"):
+            whole = data[: data.rfind(b"\n") + 1] or header
+            atomic_write(path, lambda tmp: tmp.write_bytes(whole))
 
     def rows(self) -> list[dict]:
         with self.path.open(newline="") as handle:
