@@ -46,7 +46,7 @@ def _convert(value: Any, annotation: Any) -> Any:
             return None
     elif annotation is float:
         # bool is an int in Python, but "true" for a gain is a mistake, not 1.0.
-        if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
+        if isinstance(value, (int, float)) and not isinstance(value, bool) and is_finite(value):
             return float(value)
     elif annotation is int:
         if isinstance(value, int) and not isinstance(value, bool):
@@ -92,3 +92,11 @@ def coerce(value: Any, annotation: Any, default: Any, source: str | Path | None,
         return _convert(value, annotation)
     except _Mismatch:
         raise ConfigError(source, field, f"got {quote(value)}; allowed: {describe(annotation)} (default {quote(default)})") from None
+
+
+def is_finite(number: int | float) -> bool:
+    """Whether ``number`` is finite as a float (an integer past a float's range, as a file may hold, is not)."""
+    try:
+        return math.isfinite(number)
+    except OverflowError:
+        return False

@@ -11,12 +11,11 @@ from __future__ import annotations
 
 import collections
 import functools
-import math
 from pathlib import Path
 from typing import Any, Callable, Mapping, NamedTuple
 
 from common.errors import ConfigError, quote
-from common.params import coerce, keyword_parameters
+from common.params import coerce, is_finite, keyword_parameters
 
 
 class StepContext(NamedTuple):
@@ -198,7 +197,7 @@ def resolve_reward_spec(spec: str | Mapping[str, Any], source: str | Path | None
             raise ConfigError(source, field, f"unknown reward term; allowed: {', '.join(TERMS)}")
         entry = {"weight": entry} if not isinstance(entry, Mapping) else dict(entry)
         weight = entry.get("weight")
-        if isinstance(weight, bool) or not isinstance(weight, (int, float)) or not math.isfinite(weight):
+        if isinstance(weight, bool) or not isinstance(weight, (int, float)) or not is_finite(weight):
             raise ConfigError(source, f"{field}.weight", f"expected a finite number, got {quote(weight)}")
         allowed = keyword_parameters(TERMS[name])
         for param, value in list(entry.items()):
