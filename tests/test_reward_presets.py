@@ -56,3 +56,12 @@ def test_a_crash_under_the_default_reward_costs_what_the_goal_pays():
     assert shares["collision"] == -100.0 and total == pytest.approx(-100.05)
     _, shares = Reward("default")(crash._replace(collided=False, reached=True))
     assert shares["goal"] == 100.0
+
+
+@pytest.mark.parametrize("spec", [{"progress": 10**400}, {"proximity": {"weight": -1.0, "threshold": 10**400}}])
+def test_an_integer_past_a_floats_range_is_refused_in_one_line(spec):
+    from common.errors import ConfigError
+    from common.rewards import resolve_reward_spec
+
+    with pytest.raises(ConfigError, match="progress|threshold"):
+        resolve_reward_spec(spec)
