@@ -1,4 +1,5 @@
-"""Fault injection for the sweep tests: a trial whose process dies once, after its first checkpoint."""
+"""Fault injection for the sweep tests: a trial whose process dies once, after its first checkpoint; a
+trial that fails outright."""
 
 from __future__ import annotations
 
@@ -21,3 +22,24 @@ def crash_once(config: dict) -> None:
 
         tune.report = die
     run_trial(config)
+
+
+
+def fail_first_to_start(config: dict) -> None:
+    """Run the trial; the first trial of the sweep to start fails at its first evaluation (its run
+    directory begun) with a two-line error. The others run as usual."""
+    from ray import tune
+
+    try:
+        os.close(os.open(Path(config["sweep_dir"]) / "failed-once", os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+    except FileExistsError:
+        return run_trial(config)
+
+    def fail(metrics, **kwargs):
+        raise RuntimeError("planted failure at the first evaluation\nits second line")
+
+    report, tune.report = tune.report, fail
+    try:
+        run_trial(config)
+    finally:
+        tune.report = report  # a reused worker runs its next trial as usual

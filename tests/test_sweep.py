@@ -148,3 +148,72 @@ def test_a_sweep_killed_before_tune_saved_its_state_resumes_from_the_run_directo
 
 def _eval_steps(run: Path) -> list[int]:
     return [int(row["timesteps"]) for row in csv.DictReader((run / "eval.csv").open())]
+
+
+# A search space is checked completely, and before Ray starts: each case's one-line error names the
+# space file and the field. The first is the one whose every trial used to fail (exit 0 all the same).
+SPACES = [
+    ("stages.0.budget: {randint: [1, 1.0e+300]}", "stages.0.budget.randint: got [1, 1e+300]; allowed: two whole numbers"),
+    ("stages.0.budget: {randint: [0, 100]}", "stages.0.budget: randint value 0 is not valid in the curriculum "
+                                             "(stages.0.budget: Input should be greater than or equal to 1"),
+    ("stages.0.n_envs: {uniform: [1, 8]}", "stages.0.n_envs: uniform value 3.674 is not valid in the curriculum"),
+    ("stages.0.max_steps: {choice: [60, 1.0e+9]}", "stages.0.max_steps: choice value 1000000000.0 is not valid"),
+    ("stages.3.budget: {randint: [1, 5]}", "stages.3.budget: stages is a list of 1; allowed: an index from 0 to 0"),
+    ("stages.0.name.x: {choice: [1]}", "stages.0.name.x: stages.0.name is 'open', not a mapping or list"),
+    ("stages.0.bogus: {choice: [1]}", "stages.0.bogus: choice value 1 is not valid in the curriculum"),
+    ("stages.0.hyperparams.n_epochs: {choice: [3, .nan]}", "stages.0.hyperparams.n_epochs.choice: got nan; allowed: finite"),
+    ("stages.0.hyperparams.learning_rate: {uniform: [-1.0e+308, 1.0e+308]}", "learning_rate.uniform: got [-1e+308, 1e+308]"),
+    ("seed: {randint: [1, 3]}", "seed: the sweep sets each trial's seed (--seeds)"),
+]
+
+
+def test_a_space_file_is_checked_completely_before_ray_starts(tmp_path, capsys, monkeypatch):
+    import ray
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("Ray started before the space file was checked")
+
+    monkeypatch.setattr(ray, "init", refuse)
+    space = tmp_path / "space.yaml"
+    for text, expected in SPACES:
+        space.write_text(text + "\n")
+        code = main(["sweep", str(TINY), "--space", str(space), "--out", str(tmp_path / "s")])
+        err = capsys.readouterr().err
+        assert (code, err.count("\n")) == (2, 1) and err.startswith(f"error: {space}: ") and expected in err, (text, err)
+    assert not (tmp_path / "s").exists()
+    # The documented example space is accepted (and then reaches Ray, refused here).
+    space.write_text("stages.0.hyperparams.learning_rate: {loguniform: [1.0e-4, 1.0e-3]}\n"
+                     "stages.0.hyperparams.n_epochs: {choice: [3, 5, 10]}\nstages.0.env_kwargs.lidar_noise: {uniform: [0.0, 0.05]}\n")
+    with pytest.raises(AssertionError, match="Ray started"):
+        main(["sweep", str(TINY), "--space", str(space), "--out", str(tmp_path / "s")])
+    # So is a CPU share that would have divided by zero once the sweep had run.
+    assert main(["sweep", str(TINY), "--cpus-per-trial", "0", "--out", str(tmp_path / "s")]) == 2
+    assert "--cpus-per-trial: got 0.0; allowed: a number above 0" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_failed_trials_fail_the_sweep_which_names_them_and_still_reports_the_rest(tmp_path, capsys, monkeypatch):
+    from common.curriculum import sweep
+    from tests.sweep_faults import fail_first_to_start
+
+    monkeypatch.setenv("PYTHONPATH", str(ROOT))  # the workers import the fault injector from tests/
+    monkeypatch.setattr(sweep, "run_trial", fail_first_to_start)
+    space, out = tmp_path / "space.yaml", tmp_path / "sweep"
+    space.write_text("stages.0.hyperparams.n_epochs: {choice: [1]}\n")  # both trials get the same value
+    code = main(["sweep", str(TINY), "--space", str(space), "--trials", "2", "--max-failures", "0", "--out", str(out)])
+    printed = capsys.readouterr()
+    results = json.loads((out / "sweep.json").read_text())
+    assert code == 1 and len(results["failed"]) == 1, (code, printed.err[-2000:])
+    (failed,) = results["failed"]
+    (other,) = [t for t in results["trials"] if t["name"] != failed]
+    assert failed.startswith("seed0-n_epochs=1-") and other["status"] == "done"
+    # Tune logs the trial's traceback as it happens; the sweep ends with which trials failed and why,
+    # each in one line (the first of its error).
+    assert printed.err.splitlines()[-2:] == [f"error: 1 of 2 trials failed (marked in {out / 'sweep.md'}):",
+                                             f"  {failed}: RuntimeError: planted failure at the first evaluation"]
+    assert "over 1 trials" in printed.out  # the report is still written, over the trial that ran
+    report = (out / "sweep.md").read_text()
+    assert "**1 of 2 trials failed**" in report and f"- `{failed}`: RuntimeError: planted failure" in report
+    assert report.count("| **failed** |") == 1
+    # The same values proposed twice are two trials, each with a run directory of its own.
+    assert sorted(p.name for p in (out / "trials").iterdir()) == sorted([failed, other["name"]])

@@ -81,7 +81,14 @@ def _sweep(args: argparse.Namespace) -> int:
                   f"{agg['mean']:.3f}, over {agg['n']} trials")
     print(f"{len(results['trials'])} trials, {results['concurrent_trials']} at a time, {results['wall_seconds']:.0f} s; "
           f"results: {out / 'sweep.md'}")
-    return 0
+    failed = [t for t in results["trials"] if t["status"] == "error"]
+    if not failed:
+        return 0
+    # The report is written and marks them; the exit code says the sweep is not what was asked for.
+    print(f"error: {len(failed)} of {len(results['trials'])} trials failed (marked in {out / 'sweep.md'}):", file=sys.stderr)
+    for trial in failed:
+        print(f"  {trial['name']}: {trial['error']}", file=sys.stderr)
+    return 1
 
 
 def _eval(args: argparse.Namespace) -> int:

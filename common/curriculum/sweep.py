@@ -13,17 +13,23 @@ The sweep directory must be on storage every node sees.
 Results: ``OUT/sweep.json`` (every trial with its seed, parameters, status, final test figures and
 run directory; ``aggregate`` per metric: mean, interquartile mean and a bootstrap 95 % interval),
 ``OUT/sweep.md`` and ``OUT/sweep.png``. The interquartile mean (the mean of the middle half) with a
-bootstrap interval is the aggregate rliable recommends for few seeds (Agarwal et al. 2021).
+bootstrap interval is the aggregate rliable recommends for few seeds (Agarwal et al. 2021). Trials
+that failed are marked there (status ``error``, the first line of their error, named in ``failed``);
+the command then exits with code 1.
 
 A search space is YAML: dotted paths into the curriculum, each a distribution::
 
     stages.0.hyperparams.learning_rate: {loguniform: [1.0e-4, 1.0e-3]}
     stages.0.hyperparams.n_epochs: {choice: [3, 5, 10]}
     stages.0.env_kwargs.lidar_noise: {uniform: [0.0, 0.05]}
+
+It is checked completely before Ray starts (:func:`load_space`), so a value the curriculum's schema
+refuses is a one-line error naming the space file and the path, not a sweep of failed trials.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
@@ -45,42 +51,128 @@ SEED_STRIDE = 1000  # seeds of a seed sweep: curriculum seed + 1000·k, so no tw
 
 # -- search spaces -------------------------------------------------------------------------------
 
+INT_BOUND = 2**53  # randint bounds: whole numbers Tune and Optuna sample exactly (floats hold them)
+MAX_PARAMS = 64  # parameters of one space: more is no search TPE can do in any number of trials
+MAX_CHOICES = 256  # values of one choice, each checked against the schema before Ray starts
+RESERVED = {"seed": "the sweep sets each trial's seed (--seeds); leave it out of the space"}
 
-def load_space(path: str | Path, curriculum: dict) -> dict[str, tuple[str, list]]:
-    """A validated search space: dotted path -> (distribution, arguments); one-line errors."""
+
+def load_space(path: str | Path, curriculum: dict, source: str | Path | None = None) -> dict[str, tuple[str, list]]:
+    """A validated search space: dotted path -> (distribution, arguments); one-line errors naming ``path``.
+
+    Checked completely before Ray starts: every path leads into the curriculum, every distribution's
+    kind and arguments are valid and finite, and the curriculum (``source``, already valid) stays
+    valid with each parameter at each end of its range (and inside it), alone and all together.
+    """
     data = read_yaml_mapping(path)
+    if len(data) > MAX_PARAMS:
+        raise ConfigError(path, None, f"{len(data)} parameters; allowed: at most {MAX_PARAMS}")
     space = {}
     for key, spec in data.items():
+        if not isinstance(key, str):
+            raise ConfigError(path, quote(key), "not a path into the curriculum (e.g. stages.0.hyperparams.learning_rate)")
+        if key in RESERVED:
+            raise ConfigError(path, key, RESERVED[key])
         if not isinstance(spec, dict) or len(spec) != 1 or next(iter(spec)) not in DISTRIBUTIONS:
-            raise ConfigError(path, str(key), f"got {quote(spec)}; allowed: {{{' | '.join(DISTRIBUTIONS)}: [...]}}")
+            raise ConfigError(path, key, f"got {quote(spec)}; allowed: {{{' | '.join(DISTRIBUTIONS)}: [...]}}")
         kind, args = next(iter(spec.items()))
-        if not isinstance(args, list) or not args or (kind != "choice" and len(args) != 2):
-            raise ConfigError(path, f"{key}.{kind}", "allowed: [low, high] (or a list of values for choice)")
-        if kind != "choice" and not all(isinstance(a, (int, float)) and math.isfinite(a) for a in args):
-            raise ConfigError(path, f"{key}.{kind}", f"got {quote(args)}; allowed: two finite numbers")
-        if kind != "choice" and not args[0] < args[1]:
-            raise ConfigError(path, f"{key}.{kind}", f"got {quote(args)}; allowed: low < high")
-        if kind == "loguniform" and args[0] <= 0:
-            raise ConfigError(path, f"{key}.{kind}", "allowed: 0 < low < high")
-        _check_path(curriculum, str(key), path)
-        space[str(key)] = (kind, args)
+        space[key] = (kind, _arguments(path, f"{key}.{kind}", kind, args))
+        _check_path(curriculum, key, path)
     if not space:
         raise ConfigError(path, None, "an empty search space; allowed: dotted curriculum paths with distributions")
+    for key in space:
+        inner = next((other for other in space if other.startswith(key + ".")), None)
+        if inner is not None:
+            raise ConfigError(path, key, f"overlaps {inner}; allowed: each curriculum value in one parameter")
+    _check_values(path, space, curriculum, source)
     return space
 
 
+def _arguments(path: str | Path, field: str, kind: str, args: Any) -> list:
+    """A distribution's arguments, checked: finite numbers in order, or a list of JSON values for choice."""
+    if kind == "choice":
+        if not isinstance(args, list) or not 1 <= len(args) <= MAX_CHOICES:
+            raise ConfigError(path, field, f"got {quote(args)}; allowed: a list of 1 to {MAX_CHOICES} values")
+        for value in args:
+            try:
+                json.dumps(value, allow_nan=False)
+            except (TypeError, ValueError):
+                raise ConfigError(path, field, f"got {quote(value)}; allowed: finite numbers, strings, booleans, "
+                                  "null, lists and mappings of them") from None
+        return args
+    numbers = isinstance(args, list) and len(args) == 2 and all(  # (an int past a float's range is not finite)
+        isinstance(a, (int, float)) and not isinstance(a, bool) and abs(a) < 1e308 and math.isfinite(a) for a in args)
+    if not numbers:
+        raise ConfigError(path, field, f"got {quote(args)}; allowed: [low, high], two finite numbers")
+    if not args[0] < args[1] or not math.isfinite(float(args[1]) - float(args[0])):
+        raise ConfigError(path, field, f"got {quote(args)}; allowed: low < high, a finite range")
+    if kind == "loguniform" and args[0] <= 0:
+        raise ConfigError(path, field, f"got {quote(args)}; allowed: 0 < low < high")
+    if kind == "randint":
+        if not all(float(a).is_integer() and abs(a) <= INT_BOUND for a in args):
+            raise ConfigError(path, field, f"got {quote(args)}; allowed: two whole numbers from -2**53 to 2**53")
+        return [int(a) for a in args]
+    return [float(a) for a in args]
+
+
 def _check_path(curriculum: dict, dotted: str, source: str | Path) -> None:
-    """A path must lead into an existing stage; its last key may be new (a hyperparameter, say)."""
-    node: Any = curriculum
+    """A path runs through the curriculum's mappings and lists as :func:`with_params` will set it: list
+    indices must exist; a mapping's key may be new (a hyperparameter, say; the schema then judges it)."""
     parts = dotted.split(".")
-    for depth, part in enumerate(parts[:-1]):
-        key: Any = int(part) if isinstance(node, list) and part.isdigit() else part
-        try:
-            node = node[key]
-        except (KeyError, IndexError, TypeError):
-            node = {} if depth >= 2 else None  # stages.0.hyperparams may not exist yet
-        if node is None:
+    node: Any = curriculum
+    for depth, part in enumerate(parts):
+        where = ".".join(parts[:depth]) or "the curriculum"
+        if not part:
             raise ConfigError(source, dotted, "not a path into the curriculum (e.g. stages.0.hyperparams.learning_rate)")
+        if isinstance(node, list):
+            if not (part.isascii() and part.isdigit() and int(part) < len(node)):
+                allowed = f"an index from 0 to {len(node) - 1}" if node else "none (the list is empty)"
+                raise ConfigError(source, dotted, f"{where} is a list of {len(node)}; allowed: {allowed}")
+            node = node[int(part)]
+        elif isinstance(node, dict):
+            node = node.get(part, {})
+        else:
+            raise ConfigError(source, dotted, f"{where} is {quote(node)}, not a mapping or list to set {part!r} in")
+
+
+def _samples(kind: str, args: list) -> list:
+    """The values a trial may get that the schema could refuse: both ends and a fractional inside."""
+    if kind == "choice":
+        return args
+    low, high = args
+    if kind == "randint":
+        return [low, high]
+    inside = math.exp(math.log(low) + 0.382 * (math.log(high) - math.log(low))) if kind == "loguniform" else \
+        low + 0.382 * (high - low)
+    return [low, high, inside]
+
+
+def _check_values(path: str | Path, space: dict[str, tuple[str, list]], curriculum: dict,
+                  source: str | Path | None) -> None:
+    """The curriculum with each parameter's values substituted (alone, then all low, then all high)
+    still validates, so no trial fails on a value the curriculum's schema refuses."""
+    from common.curriculum.schema import curriculum_from_mapping
+
+    def refused(params: dict[str, Any]) -> str | None:
+        try:
+            curriculum_from_mapping(with_params(curriculum, params), source)
+        except (ValueError, TypeError) as error:
+            if isinstance(error, ConfigError):
+                return ": ".join(p for p in (error.field, error.problem) if p)
+            return f"{type(error).__name__}: {error}"
+        return None
+
+    for key, (kind, args) in space.items():
+        for value in _samples(kind, args):
+            problem = refused({key: value})
+            if problem:
+                raise ConfigError(path, key, f"{kind} value {quote(value)} is not valid in the curriculum ({problem})")
+    for end in (0, -1):
+        params = {key: _samples(kind, args)[end] for key, (kind, args) in space.items()}
+        problem = refused(params)
+        if problem:
+            ends = "low" if end == 0 else "high"
+            raise ConfigError(path, None, f"every parameter at its {ends} end together is not valid in the curriculum ({problem})")
 
 
 def with_params(curriculum: dict, params: dict[str, Any]) -> dict:
@@ -91,7 +183,8 @@ def with_params(curriculum: dict, params: dict[str, Any]) -> dict:
         parts = dotted.split(".")
         for part in parts[:-1]:
             node = node[int(part)] if isinstance(node, list) else node.setdefault(part, {})
-        node[parts[-1]] = value.item() if isinstance(value, np.generic) else value
+        last: Any = int(parts[-1]) if isinstance(node, list) else parts[-1]
+        node[last] = value.item() if isinstance(value, np.generic) else value
     return data
 
 
@@ -116,7 +209,7 @@ def run_trial(config: dict[str, Any]) -> None:
     data = with_params(config["curriculum"], config.get("params", {}))
     data["seed"] = int(config["seed"])
     curriculum = curriculum_from_mapping(data, config["source"])
-    run_dir = Path(config["sweep_dir"]) / "trials" / trial_name(config)
+    run_dir = Path(config["sweep_dir"]) / "trials" / trial_name(config, tune.get_context().get_trial_id())
     node = ray.get_runtime_context().get_node_id()
 
     def report(row: dict) -> None:
@@ -131,12 +224,26 @@ def run_trial(config: dict[str, Any]) -> None:
                  "run_dir": str(run_dir), "final": final, "done": True})
 
 
-def trial_name(config: dict[str, Any]) -> str:
-    """A trial's run directory name: stable across retries and resumes."""
+def trial_name(config: dict[str, Any], trial_id: str | None = None) -> str:
+    """A trial's run directory name: stable across retries and resumes, and one file name.
+
+    A seed sweep's trials are named by seed (``seed1000``), which a sweep restarted from nothing but
+    its run directories relies on. A search's also carry Tune's trial id, since a search may propose
+    the same values twice and two trials must never share a run directory. A name that would not be
+    a short, plain file name (a long or path-like value) is replaced by a digest of the parameters.
+    """
     params = config.get("params") or {}
     suffix = "-".join(f"{k.split('.')[-1]}={v:.4g}" if isinstance(v, float) else f"{k.split('.')[-1]}={v}"
                       for k, v in sorted(params.items()))
+    if len(suffix) > 120 or not set(suffix) <= _NAME_CHARS:
+        digest = hashlib.sha256(json.dumps(params, sort_keys=True, default=str).encode()).hexdigest()[:12]
+        suffix = f"params={digest}"
+    if params and trial_id:
+        suffix += f"-{trial_id}"
     return f"seed{config['seed']}" + (f"-{suffix}" if suffix else "")
+
+
+_NAME_CHARS = set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_+-=.,")
 
 
 # -- the sweep -----------------------------------------------------------------------------------
@@ -158,15 +265,23 @@ def check_address(address: str, timeout: float = 3.0) -> None:
 def run_sweep(source: str | Path, out: Path, seeds: int = 1, space: str | Path | None = None, trials: int = 8,
               metric: str = "success_rate", address: str | None = None, cpus_per_trial: float = 1.0,
               max_failures: int = 2, resume: bool = False, device: str | None = None,
-              trainable: Callable[[dict], None] = run_trial) -> dict[str, Any]:
-    """Run the sweep (or continue an interrupted one) and write its results; return sweep.json's content."""
+              trainable: Callable[[dict], None] | None = None) -> dict[str, Any]:
+    """Run the sweep (or continue an interrupted one) and write its results; return sweep.json's content.
+
+    Every input is checked before Ray starts. Trials that fail are in the results (status ``error``,
+    the first line of the error, and the names in ``failed``), for the caller to report and exit on.
+    """
     from common.curriculum.schema import load_curriculum
 
     if metric not in METRICS:
         raise ConfigError(None, "--metric", f"{metric!r}; allowed: {', '.join(METRICS)}")
+    if not (isinstance(cpus_per_trial, (int, float)) and 0 < cpus_per_trial <= 1024):  # refuses NaN too
+        raise ConfigError(None, "--cpus-per-trial", f"got {cpus_per_trial!r}; allowed: a number above 0, at most 1024")
+    load_curriculum(source)  # one-line errors before any trial starts
+    domains = None if space is None else load_space(space, read_yaml(source), source)
     if address:
         check_address(address)
-    load_curriculum(source)  # one-line errors before any trial starts
+    trainable = trainable or run_trial
     # Tune's newer console output ignores verbose=0; the runs' own reports are what users read.
     os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")
     import ray
@@ -203,7 +318,6 @@ def run_sweep(source: str | Path, out: Path, seeds: int = 1, space: str | Path |
                 from ray.tune.schedulers import ASHAScheduler
                 from ray.tune.search.optuna import OptunaSearch
 
-                domains = load_space(space, curriculum)
                 param_space = {**base, "seed": curriculum.get("seed", 0),
                                "params": {key: _tune_domain(kind, args) for key, (kind, args) in domains.items()}}
                 tune_config = tune.TuneConfig(metric=metric, mode="max", num_samples=trials,

@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import csv
+import importlib.util
 import json
+import re
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -18,11 +21,27 @@ METRICS = ("success_rate", "spl")  # of the last stage's final test draw (and of
 
 
 def _trial(result) -> dict[str, Any]:
+    from common.curriculum.sweep import trial_name
+
     config, metrics = result.config, result.metrics or {}
     status = "done" if metrics.get("done") else ("error" if result.error else "stopped early")
-    return {"seed": config["seed"], "params": config.get("params") or {}, "status": status,
-            "final": metrics.get("final"), "run_dir": metrics.get("run_dir"), "node": metrics.get("node"),
-            "error": None if result.error is None else str(result.error).splitlines()[0][:200]}
+    return {"name": trial_name(config, metrics.get("trial_id")), "seed": config["seed"],
+            "params": config.get("params") or {}, "status": status, "final": metrics.get("final"),
+            "run_dir": metrics.get("run_dir"), "node": metrics.get("node"), "error": first_line(result.error)}
+
+
+_ANSI = re.compile(r"\x1b\[[0-9;]*[A-Za-z]")
+
+
+def first_line(error: BaseException | None) -> str | None:
+    """What went wrong in a trial, in one line: the trial's own exception (Ray wraps it in a
+    RayTaskError whose text starts with the worker's address and a traceback), its first line."""
+    if error is None:
+        return None
+    cause = getattr(error, "cause", None) or error
+    lines = [line.strip() for line in _ANSI.sub("", str(cause)).splitlines() if line.strip()]
+    text = f"{type(cause).__name__}: {lines[0]}" if lines else type(cause).__name__
+    return text if len(text) <= 200 else text[:197] + "..."
 
 
 def _curve(run_dir: str | None) -> list[tuple[int, float]]:
@@ -42,6 +61,7 @@ def write_results(out: Path, grid, metric: str, address: str | None, concurrent:
     results = {
         "backend": "ray", "address": address or "local", "metric": metric, "concurrent_trials": concurrent,
         "wall_seconds": round(wall_seconds, 1), "trials": trials,
+        "failed": [t["name"] for t in trials if t["status"] == "error"],
         "aggregate": {m: aggregate([t["final"][m] for t in done]) for m in METRICS},
     }
     if searched and done:
@@ -55,15 +75,20 @@ def write_results(out: Path, grid, metric: str, address: str | None, concurrent:
 
 def _markdown(results: dict[str, Any]) -> str:
     lines = [f"# Sweep ({results['backend']}, {results['address']})", "",
-             f"{len(results['trials'])} trials, {results['concurrent_trials']} at a time, {results['wall_seconds']:.0f} s.",
-             "", "| seed | parameters | status | test success | test SPL | run directory |", "|---:|---|---|---:|---:|---|"]
+             f"{len(results['trials'])} trials, {results['concurrent_trials']} at a time, {results['wall_seconds']:.0f} s.", ""]
+    failed = [t for t in results["trials"] if t["status"] == "error"]
+    if failed:
+        lines += [f"**{len(failed)} of {len(results['trials'])} trials failed**; the aggregate is over the others:", ""]
+        lines += [f"- `{t['name']}`: {t['error']}" for t in failed] + [""]
+    lines += ["| seed | parameters | status | test success | test SPL | run directory |", "|---:|---|---|---:|---:|---|"]
     for t in results["trials"]:
         params = ", ".join(f"{k.split('.')[-1]}={v:.4g}" if isinstance(v, float) else f"{k.split('.')[-1]}={v}"
                            for k, v in t["params"].items()) or "–"
         final = t["final"] or {}
         success = "–" if not final else f"{final['success_rate']:.1%}"
         spl = "–" if not final else f"{final['spl']:.3f}"
-        lines.append(f"| {t['seed']} | {params} | {t['status']} | {success} | {spl} | {t['run_dir'] or '–'} |")
+        status = "**failed**" if t["status"] == "error" else t["status"]
+        lines.append(f"| {t['seed']} | {params} | {status} | {success} | {spl} | {t['run_dir'] or '–'} |")
     lines += ["", "| metric | trials | mean | IQM | IQM 95% CI (bootstrap) |", "|---|---:|---:|---:|---:|"]
     for name, agg in results["aggregate"].items():
         if agg["iqm"] is None:
@@ -96,7 +121,8 @@ def _figure(trials: list[dict], results: dict[str, Any], path: Path, searched: b
     ax.set_xlabel("timesteps")
     ax.set_ylim(0, 1.02)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="lower right")
+    if ax.get_legend_handles_labels()[0]:  # no curves when every trial failed
+        ax.legend(fontsize=8, loc="lower right")
     if searched:
         _importance(figure.add_subplot(1, 2, 2), trials, results["metric"])
     figure.tight_layout()
@@ -104,7 +130,7 @@ def _figure(trials: list[dict], results: dict[str, Any], path: Path, searched: b
 
 
 def _importance(ax, trials: list[dict], metric: str) -> None:
-    """Optuna's parameter importance (fANOVA) over the finished trials."""
+    """Optuna's parameter importance (fANOVA, or PED-ANOVA without scikit-learn) over the finished trials."""
     import optuna
 
     done = [t for t in trials if t["final"] is not None and t["params"]]
@@ -119,10 +145,18 @@ def _importance(ax, trials: list[dict], metric: str) -> None:
         params = {k: t["params"][k] if isinstance(distributions[k], optuna.distributions.FloatDistribution)
                   else json.dumps(t["params"][k]) for k in keys}
         study.add_trial(optuna.trial.create_trial(params=params, distributions=distributions, value=t["final"][metric]))
-    importances = optuna.importance.get_param_importances(study, evaluator=optuna.importance.FanovaImportanceEvaluator(seed=0))
+    # fANOVA fits a random forest with scikit-learn, which the sweep extra does not install; without
+    # it, PED-ANOVA (Optuna's own, numpy only) rather than a report that dies after the sweep ran.
+    if importlib.util.find_spec("sklearn") is not None:
+        method, evaluator = "fANOVA", optuna.importance.FanovaImportanceEvaluator(seed=0)
+    else:
+        method, evaluator = "PED-ANOVA", optuna.importance.PedAnovaImportanceEvaluator()
+    with warnings.catch_warnings():  # e.g. PED-ANOVA's "importances will be equal" when every trial scored the same
+        warnings.simplefilter("ignore")
+        importances = optuna.importance.get_param_importances(study, evaluator=evaluator)
     names = list(importances)
     ax.barh([n.split(".")[-1] for n in names], [importances[n] for n in names], color="tab:orange")
-    ax.set_title(f"parameter importance for test {metric} (fANOVA)", fontsize=9)
+    ax.set_title(f"parameter importance for test {metric} ({method})", fontsize=9)
 
 
 def _distribution(values: list):
