@@ -9,7 +9,6 @@ import pytest
 import flatland  # noqa: F401  (registers the env)
 from common.errors import ConfigError
 from common.evaluation import run_episode
-from common.generators import get_suite
 from common.readings import Readings
 from common.scenario import CircleObstacle, Scenario
 from common.task import STUCK_WINDOW, Task, judged_radius, threshold_range

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 
 from common.controllers.base import Controller
 from common.controllers.go_to_goal import goal_polar

@@ -8,11 +8,14 @@ import math
 import sys
 import warnings
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 
 from common.errors import ConfigError, ScenarioWarning
+
+if TYPE_CHECKING:
+    from common.conditions import Conditions
 
 EXIT_BAD_INPUT = 2
 

@@ -29,7 +29,6 @@ refuses is a one-line error naming the space file and the path, not a sweep of f
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import os
@@ -41,7 +40,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from common.curriculum.sweep_report import METRICS, write_results
+from common.curriculum.sweep_report import METRICS, trial_name, write_results
 from common.errors import ConfigError, quote
 from common.yaml_io import read_yaml, read_yaml_mapping
 
@@ -222,28 +221,6 @@ def run_trial(config: dict[str, Any]) -> None:
     tune.report({"success_rate": final["success_rate"], "spl": final["spl"], "stage": "final",
                  "timesteps": state["stages"][curriculum.stages[-1].name]["timesteps"], "node": node,
                  "run_dir": str(run_dir), "final": final, "done": True})
-
-
-def trial_name(config: dict[str, Any], trial_id: str | None = None) -> str:
-    """A trial's run directory name: stable across retries and resumes, and one file name.
-
-    A seed sweep's trials are named by seed (``seed1000``), which a sweep restarted from nothing but
-    its run directories relies on. A search's also carry Tune's trial id, since a search may propose
-    the same values twice and two trials must never share a run directory. A name that would not be
-    a short, plain file name (a long or path-like value) is replaced by a digest of the parameters.
-    """
-    params = config.get("params") or {}
-    suffix = "-".join(f"{k.split('.')[-1]}={v:.4g}" if isinstance(v, float) else f"{k.split('.')[-1]}={v}"
-                      for k, v in sorted(params.items()))
-    if len(suffix) > 120 or not set(suffix) <= _NAME_CHARS:
-        digest = hashlib.sha256(json.dumps(params, sort_keys=True, default=str).encode()).hexdigest()[:12]
-        suffix = f"params={digest}"
-    if params and trial_id:
-        suffix += f"-{trial_id}"
-    return f"seed{config['seed']}" + (f"-{suffix}" if suffix else "")
-
-
-_NAME_CHARS = set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_+-=.,")
 
 
 # -- the sweep -----------------------------------------------------------------------------------

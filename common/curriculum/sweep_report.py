@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import hashlib
 import importlib.util
 import json
 import re
@@ -21,13 +22,33 @@ METRICS = ("success_rate", "spl")  # of the last stage's final test draw (and of
 
 
 def _trial(result) -> dict[str, Any]:
-    from common.curriculum.sweep import trial_name
-
     config, metrics = result.config, result.metrics or {}
     status = "done" if metrics.get("done") else ("error" if result.error else "stopped early")
     return {"name": trial_name(config, metrics.get("trial_id")), "seed": config["seed"],
             "params": config.get("params") or {}, "status": status, "final": metrics.get("final"),
             "run_dir": metrics.get("run_dir"), "node": metrics.get("node"), "error": first_line(result.error)}
+
+
+def trial_name(config: dict[str, Any], trial_id: str | None = None) -> str:
+    """A trial's run directory name: stable across retries and resumes, and one file name.
+
+    A seed sweep's trials are named by seed (``seed1000``), which a sweep restarted from nothing but
+    its run directories relies on. A search's also carry Tune's trial id, since a search may propose
+    the same values twice and two trials must never share a run directory. A name that would not be
+    a short, plain file name (a long or path-like value) is replaced by a digest of the parameters.
+    """
+    params = config.get("params") or {}
+    suffix = "-".join(f"{k.split('.')[-1]}={v:.4g}" if isinstance(v, float) else f"{k.split('.')[-1]}={v}"
+                      for k, v in sorted(params.items()))
+    if len(suffix) > 120 or not set(suffix) <= _NAME_CHARS:
+        digest = hashlib.sha256(json.dumps(params, sort_keys=True, default=str).encode()).hexdigest()[:12]
+        suffix = f"params={digest}"
+    if params and trial_id:
+        suffix += f"-{trial_id}"
+    return f"seed{config['seed']}" + (f"-{suffix}" if suffix else "")
+
+
+_NAME_CHARS = set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_+-=.,")
 
 
 _ANSI = re.compile(r"\x1b\[[0-9;]*[A-Za-z]")
