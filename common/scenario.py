@@ -8,7 +8,8 @@ Every number is range-checked before anything uses it (files are shared between 
 radius of 1e300 must be a one-line error, not a crash deep in a physics engine): finite values,
 coordinates within :data:`MAX_COORDINATE` m, lengths up to :data:`MAX_LENGTH` m (a 1 km world),
 speeds up to :data:`MAX_SPEED`, at most :data:`MAX_OBSTACLES` obstacles of at most
-:data:`MAX_VERTICES` vertices, and no obstacle or robot wider than the world's diagonal.
+:data:`MAX_VERTICES` vertices (:data:`MAX_TOTAL_VERTICES` in all), and no obstacle or robot wider
+than the world's diagonal.
 """
 
 from __future__ import annotations
@@ -31,7 +32,8 @@ MAX_LENGTH = 1000.0  # m: world sides, obstacle and robot sizes, lidar range
 MAX_COORDINATE = 10_000.0  # m: any position
 MAX_SPEED = 100.0  # m/s and rad/s
 MAX_OBSTACLES = 2000
-MAX_VERTICES = 1000
+MAX_VERTICES = 1000  # of one polygon or polyline
+MAX_TOTAL_VERTICES = 10_000  # of all of a scenario's: what loading, building and scanning it costs
 
 Coordinate = Annotated[float, Field(ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
 Point = tuple[Coordinate, Coordinate]
@@ -277,11 +279,20 @@ class Scenario(_Frozen):
         if self.robot.bounding_radius >= diagonal:
             raise ValueError(f"the robot ({self.robot.bounding_radius:g} m across) is wider than the world; "
                              f"allowed: below its diagonal, {diagonal:g} m")
+        vertices = 0
         for index, obstacle in enumerate(self.obstacles):
-            size = obstacle.radius if isinstance(obstacle, CircleObstacle) else (
-                max(obstacle.length, obstacle.width) if isinstance(obstacle, BoxObstacle) else 0.0)
+            if isinstance(obstacle, CircleObstacle):
+                size = obstacle.radius
+            elif isinstance(obstacle, BoxObstacle):
+                size = max(obstacle.length, obstacle.width)
+            else:
+                size = 0.0
+                vertices += len(obstacle.vertices if isinstance(obstacle, PolygonObstacle) else obstacle.points)
             if size > diagonal:
                 raise ValueError(f"obstacle {index} ({size:g} m) is larger than the world; allowed: up to its diagonal, {diagonal:g} m")
+        if vertices > MAX_TOTAL_VERTICES:
+            raise ValueError(f"the polygons and polylines hold {vertices:,} vertices in all; allowed: at most "
+                             f"{MAX_TOTAL_VERTICES:,}")
         return self
 
     @property

@@ -295,3 +295,38 @@ def test_a_grid_of_a_huge_world_is_coarsened_to_a_bounded_size():
     assert grid.occupied[1000, 1000] and not grid.occupied[100, 100]  # the obstacle still drawn, the rest free
     assert ScanMapper.for_scenario(huge, 0.1).hits.size <= MAX_CELLS
     assert scenario_grid(Scenario(), 0.1).resolution == 0.1  # ordinary worlds keep their resolution
+
+
+def test_polygons_and_polylines_are_rasterised_where_their_distance_is_below_the_inflation():
+    # The scanline raster must mark exactly the cells whose centres the obstacle's signed distance
+    # puts within the inflation (inside a polygon counts), as the distance to every edge would.
+    from common.occupancy import scenario_grid
+    from common.scenario import PolygonObstacle, Scenario, SegmentObstacle, WorldSpec
+
+    rng = np.random.default_rng(7)
+    checked = 0
+    for case in range(40):
+        k = int(rng.integers(3, 40))
+        angles = np.sort(rng.uniform(0, 2 * np.pi, k))
+        radii = rng.uniform(0.5, 3.0, k)
+        centre = rng.uniform(3.0, 7.0, 2)
+        ring = np.column_stack([centre[0] + radii * np.cos(angles), centre[1] + radii * np.sin(angles)])
+        if case % 2:
+            try:
+                obstacle = PolygonObstacle(vertices=[tuple(p) for p in (ring if case % 4 == 1 else ring[::-1])])
+            except ValueError:  # a sliver the scenario refuses
+                continue
+        else:
+            obstacle = SegmentObstacle(points=[tuple(p) for p in ring[: max(2, k // 2)]])
+        resolution, inflation = float(rng.uniform(0.05, 0.3)), float(rng.choice([0.0, rng.uniform(0.05, 0.5)]))
+        scenario = Scenario(world=WorldSpec(width=10.0, height=10.0, walls=False), obstacles=[obstacle],
+                            start=(0.2, 0.2, 0.0), goal=(9.8, 9.8))
+        grid = scenario_grid(scenario, resolution, inflation)
+        rows, cols = grid.occupied.shape
+        centres = np.array([[(c + 0.5) * resolution, (r + 0.5) * resolution] for r in range(rows) for c in range(cols)])
+        distance = obstacle.sdf(centres).reshape(rows, cols)
+        expected = distance < inflation
+        ties = np.abs(distance - inflation) < 1e-9
+        assert np.array_equal(grid.occupied[~ties], expected[~ties]), f"case {case}"
+        checked += 1
+    assert checked >= 30

@@ -280,3 +280,14 @@ def test_box_corner_table_is_the_rotation_formula_to_the_last_bit_and_counter_cl
     edges = np.roll(corners, -1, axis=1) - corners
     turns = edges[:, :-1, 0] * edges[:, 1:, 1] - edges[:, :-1, 1] * edges[:, 1:, 0]
     assert (turns > 0).all()  # every turn to the left
+
+
+def test_the_vertices_of_all_polygons_and_polylines_are_capped():
+    from common.scenario import MAX_TOTAL_VERTICES, PolygonObstacle, SegmentObstacle
+
+    ring = [(5.0 + 3.0 * math.cos(a), 5.0 + 3.0 * math.sin(a)) for a in np.linspace(0, 2 * math.pi, 1000, endpoint=False)]
+    line = [(x, 1.0) for x in np.linspace(0.5, 9.5, 1000)]
+    world = {"world": {"width": 100.0, "height": 100.0}}
+    Scenario.model_validate({**world, "obstacles": [PolygonObstacle(vertices=ring)] * 5 + [SegmentObstacle(points=line)] * 5})
+    with pytest.raises(ValueError, match=f"11,000 vertices in all; allowed: at most {MAX_TOTAL_VERTICES:,}"):
+        Scenario.model_validate({**world, "obstacles": [PolygonObstacle(vertices=ring)] * 6 + [SegmentObstacle(points=line)] * 5})
