@@ -1,7 +1,10 @@
 """Trained policies: rebuilt from a policy zip's manifest and weights, and driven like a controller.
 
-:func:`load_policy` builds the network the manifest describes and loads ``policy.pth`` into it
-(weights only; see :mod:`common.curriculum.policy_file`). A zip whose weights do not fit its
+:func:`load_policy` reads ``policy.pth`` first (weights only; see :mod:`common.curriculum.policy_file`),
+then checks that the network the manifest describes is no larger than those weights, counted from
+the manifest alone (:func:`network_parameters`), and only then builds it and loads the weights
+into it: the weights' tensors are the truth, and a manifest describing a network of gigabytes
+beside small weights is refused before anything is allocated. A zip whose weights do not fit its
 manifest is refused with a one-line :class:`ConfigError`. Resuming training and ``init_from``
 load weights the same way into a model built from the curriculum's own hyperparameters.
 """
@@ -14,8 +17,9 @@ from typing import Any
 import numpy as np
 
 from common.actions import ACTION_SPACE, ActionMapping
-from common.curriculum.policy_file import Manifest, Normalizer, PolicyFile
-from common.errors import ConfigError
+from common.curriculum.policy_file import MANIFEST, Manifest, Normalizer, PolicyFile
+from common.errors import ConfigError, quote
+from common.files import size_text
 from common.observations import ObservationLayout, make_layout
 from common.readings import Readings
 from common.scenario import LidarSpec, RobotProfile
@@ -44,11 +48,86 @@ def observation_space(manifest: Manifest):
     return make_layout(manifest.observation, RobotProfile(), LidarSpec(), manifest.goal_distance_scale).space
 
 
-def build_policy(manifest: Manifest, device: str = "cpu"):
-    """A fresh SB3 policy network shaped as the manifest says."""
+DEFAULT_NET_ARCH = {"ppo": [64, 64], "sac": [256, 256], "td3": [400, 300]}  # SB3's MlpPolicy defaults
+DEFAULT_N_CRITICS = 2
+
+
+def _mlp(sizes: list[int]) -> int:
+    """Parameters of a chain of Linear layers through ``sizes`` (weights and biases)."""
+    return sum(a * b + b for a, b in zip(sizes, sizes[1:]))
+
+
+def network_parameters(manifest: Manifest, source: str | Path | None = None) -> int:
+    """How many parameters the policy network the manifest describes holds, counted without
+    building it (stable-baselines3's MlpPolicy: tests check the count against built networks).
+
+    A combination SB3 would refuse with an assertion or a TypeError is a one-line ConfigError.
+    """
+    kwargs = manifest.policy_kwargs
+    algorithm, net_arch = manifest.algorithm, kwargs.net_arch
+    field = f"{MANIFEST}: policy_kwargs"
+    obs = int(observation_space(manifest).shape[0])
+    act = int(ACTION_SPACE.shape[0])
+    if algorithm == "ppo":
+        if kwargs.n_critics is not None:
+            raise ConfigError(source, f"{field}.n_critics", "a PPO policy has no critics to count; allowed: sac, td3")
+        if net_arch is None:
+            pi = vf = DEFAULT_NET_ARCH["ppo"]
+        elif isinstance(net_arch, dict):
+            pi, vf = net_arch.get("pi", []), net_arch.get("vf", [])
+        else:
+            pi = vf = net_arch
+        latent_pi, latent_vf = (pi or [obs])[-1], (vf or [obs])[-1]
+        log_std = latent_pi * act if manifest.use_sde else act
+        return _mlp([obs, *pi]) + _mlp([obs, *vf]) + _mlp([latent_pi, act]) + _mlp([latent_vf, 1]) + log_std
+    if net_arch is None:
+        pi = qf = DEFAULT_NET_ARCH[algorithm]
+    elif isinstance(net_arch, dict):
+        if not {"pi", "qf"} <= net_arch.keys():
+            raise ConfigError(source, f"{field}.net_arch", f"a {algorithm.upper()} network needs both pi and qf")
+        pi, qf = net_arch["pi"], net_arch["qf"]
+    else:
+        pi = qf = net_arch
+    critics = kwargs.n_critics or DEFAULT_N_CRITICS
+    critic = critics * _mlp([obs + act, *qf, 1])
+    latent = (pi or [obs])[-1]
+    if algorithm == "sac":
+        log_std = latent * act if manifest.use_sde else latent * act + act  # a parameter, or a Linear layer
+        actor = _mlp([obs, *pi]) + _mlp([latent, act]) + log_std
+        return actor + 2 * critic  # the critic and its target
+    return 2 * _mlp([obs, *pi, act]) + 2 * critic  # TD3: the actor, the critic and their targets
+
+
+def _tensor_bytes(state: Any) -> int:
+    import torch
+
+    if isinstance(state, dict):
+        return sum(v.numel() * v.element_size() for v in state.values() if isinstance(v, torch.Tensor))
+    return 0
+
+
+def check_network(manifest: Manifest, state: Any, file: PolicyFile, name: str) -> None:
+    """Refuse a manifest whose network would take more memory than the weights beside it hold
+    (float32, as SB3 builds it), before anything is built: those weights could never fit it."""
+    needed = 4 * network_parameters(manifest, file.path)
+    held = _tensor_bytes(state)
+    if needed > held:
+        raise ConfigError(file.path, f"{name}.pth", f"the weights do not fit a {manifest.algorithm.upper()} policy "
+                          f"of {size_text(needed)} of parameters, they hold {size_text(held)} (the manifest's "
+                          f"policy_kwargs: {quote(manifest.policy_kwargs.model_dump(exclude_none=True))}); refused")
+
+
+def build_policy(manifest: Manifest, device: str = "cpu", initialise: bool = True):
+    """A fresh SB3 policy network shaped as the manifest says.
+
+    ``initialise=False`` skips PPO's orthogonal initialisation (seconds for a large network),
+    for a network whose every weight is about to be loaded.
+    """
     kwargs: dict[str, Any] = manifest.policy_kwargs.to_sb3()
     if manifest.algorithm in ("ppo", "sac"):
         kwargs["use_sde"] = manifest.use_sde
+    if manifest.algorithm == "ppo" and not initialise:
+        kwargs["ortho_init"] = False
     policy_class = algorithm_class(manifest.algorithm).policy_aliases["MlpPolicy"]
     policy = policy_class(observation_space(manifest), ACTION_SPACE, lambda _: 0.0, **kwargs)
     return policy.to(device)
@@ -103,11 +182,14 @@ def load_policy(path: str | Path, device: str = "cpu", name: str | None = None) 
     """A :class:`PolicyAgent` from a policy zip (nothing in the zip is executed)."""
     file = PolicyFile(path)
     manifest = file.manifest
-    policy = build_policy(manifest, device)
-    _load_module(policy, file.tensors(f"{POLICY_WEIGHTS}.pth", device), file, POLICY_WEIGHTS,
-                 _network_description(manifest))
-    policy.set_training_mode(False)
+    state = file.tensors(f"{POLICY_WEIGHTS}.pth", device)
+    check_network(manifest, state, file, POLICY_WEIGHTS)  # before anything is built
     normalizer = file.normalizer(observation_space(manifest).shape[0])
+    file.close()  # the zip's bytes are not needed while the network is built
+    policy = build_policy(manifest, device, initialise=False)  # strict loading below sets every weight
+    _load_module(policy, state, file, POLICY_WEIGHTS, _network_description(manifest))
+    del state
+    policy.set_training_mode(False)
     if name is None:
         # A run's files are all called policy/best/last.zip: name those by curriculum and stage.
         stem = Path(path).stem

@@ -12,11 +12,43 @@ What this project reads back is only those two JSON files and the ``*.pth`` tens
 with ``torch.load(weights_only=True)``: a restricted unpickler that builds tensors and plain
 containers and refuses anything else. SB3's ``data`` entry, which holds cloudpickled Python
 objects, is never read. Every size is bounded before it is read, so a crafted zip costs neither
-unbounded memory nor time.
+unbounded memory nor time:
+
+* the zip is read through :mod:`common.files` (a regular file, at most :data:`MAX_ZIP_BYTES`,
+  whatever its size header says), and its member count (:data:`MAX_MEMBERS`) and central
+  directory size are checked from its end record *before* :mod:`zipfile` lists the members;
+* each member's uncompressed size is checked against its cap before it is decompressed, and its
+  CRC-32 when it has been read whole (a bad CRC or a size header that lies is one line);
+* a ``.pth`` member is itself a zip (torch's format): its record count (:data:`MAX_TENSOR_RECORDS`)
+  and its pickle (:data:`MAX_PICKLE_BYTES`) are bounded before ``torch.load`` unpickles it, the
+  tensors it builds may not add up to more than the member's cap (views repeating one small
+  storage would), and every floating value must be finite.
+
+The caps, against the shipped policies (the largest zip 3.8 MB, 9 members, ``policy.pth`` 1.9 MB,
+its pickle 5 kB) and the largest network a manifest may describe by its shape (SAC, 16 layers, 10
+critics: a ``policy.pth`` of 722 records and a 105 kB pickle):
+
+==================================  ==========  =====================================================
+what                                cap         why
+==================================  ==========  =====================================================
+the zip file                        64 MiB      17x the largest shipped policy
+members                             16          SB3 writes 7 or 8, this project 1 or 2 more
+central directory                   64 KiB      16 members of 4 KiB each
+JSON member (manifest, normaliser)  1 MiB       the manifest is 2 kB
+any other member, uncompressed      64 MiB      a network of 16 M float32 parameters
+all members together, uncompressed  256 MiB     4x the zip: what deflate does to float weights
+records in a ``.pth`` (its zip)     2048        a tensor each: 2.8x the 722 of that SAC (62 bytes of
+                                                directory each; 256 allowed)
+a ``.pth``'s pickle                 256 KiB     2.5x that SAC's (a million tiny values fit in 1 MiB)
+==================================  ==========  =====================================================
+
+The worst accepted: a PPO zip of 63.4 MiB (a ``policy.pth`` of 16.6 M parameters) loads in 0.3 s
+and 250 MB over the imports; a 256 KiB pickle of 261,000 empty lists is refused in 0.8 s and 55 MB.
 """
 
 from __future__ import annotations
 
+import io
 import json
 import math
 import zipfile
@@ -31,6 +63,7 @@ from common.actions import MAPPINGS
 from common.atomic import atomic_write
 from common.curriculum.hyperparams import PolicyKwargs
 from common.errors import ConfigError
+from common.files import ZIP_DAMAGE, open_zip, parse_json, read_bytes, size_text, zip_damage
 from common.observations import LAYOUTS
 from common.task import MAX_STEPS
 
@@ -38,9 +71,15 @@ MANIFEST = "nav_manifest.json"
 NORMALIZER = "nav_normalizer.json"
 FORMAT = 2  # 2: the network as data (policy_kwargs, use_sde); format 1 files meant SB3's default network
 ALGORITHMS = ("ppo", "sac", "td3")
-MAX_ZIP_BYTES = 256 * 1024 * 1024
+MAX_ZIP_BYTES = 64 * 1024 * 1024
+MAX_MEMBERS = 16
+MAX_DIRECTORY_BYTES = 64 * 1024
 MAX_JSON_BYTES = 1024 * 1024
-MAX_WEIGHTS_BYTES = 128 * 1024 * 1024
+MAX_WEIGHTS_BYTES = 64 * 1024 * 1024  # any member but the JSON ones, uncompressed
+MAX_UNCOMPRESSED_BYTES = 256 * 1024 * 1024
+MAX_TENSOR_RECORDS = 2048
+MAX_PICKLE_BYTES = 256 * 1024
+_EMPTY_ZIP = b"PK\x05\x06" + b"\0" * 18
 
 
 class Manifest(BaseModel):
@@ -182,16 +221,18 @@ class PolicyFile:
 
     def __init__(self, path: str | Path, require_manifest: bool = True) -> None:
         self.path = Path(path)
-        try:
-            size = self.path.stat().st_size
-            if size > MAX_ZIP_BYTES:
-                raise ConfigError(self.path, None, f"larger than {MAX_ZIP_BYTES // 2**20} MiB; not a policy of this project")
-            with zipfile.ZipFile(self.path) as archive:
-                self.members = {info.filename: info for info in archive.infolist()}
-        except FileNotFoundError:
-            raise ConfigError(self.path, None, "no such file") from None
-        except (zipfile.BadZipFile, IsADirectoryError, OSError):
-            raise ConfigError(self.path, None, "not a zip file; expected a policy saved by `curriculum run`") from None
+        data = read_bytes(self.path, MAX_ZIP_BYTES, "a policy zip saved by `curriculum run`",
+                          too_large="not a policy of this project")
+        self._archive = open_zip(data, self.path, None, MAX_MEMBERS, MAX_DIRECTORY_BYTES, "a policy saved by `curriculum run`")
+        self.members: dict[str, zipfile.ZipInfo] = {}
+        for info in self._archive.infolist():
+            if info.filename in self.members:
+                raise ConfigError(self.path, info.filename, "appears twice in the zip; refused")
+            self.members[info.filename] = info
+        total = sum(info.file_size for info in self.members.values())
+        if total > MAX_UNCOMPRESSED_BYTES:
+            raise ConfigError(self.path, None, f"its members hold {size_text(total)} uncompressed; allowed: at most "
+                              f"{size_text(MAX_UNCOMPRESSED_BYTES)}; refused")
         if MANIFEST not in self.members:
             if not require_manifest:
                 self.manifest, self.raw_manifest = None, {}
@@ -206,45 +247,100 @@ class PolicyFile:
             error = pydantic_error(None, exc)
             raise ConfigError(self.path, f"{MANIFEST}: {error.field}" if error.field else MANIFEST, error.problem) from None
 
-    def _read(self, name: str, limit: int) -> bytes:
+    def read(self, name: str, limit: int = MAX_WEIGHTS_BYTES) -> bytes:
+        """A member's bytes: its size checked before it is decompressed, its CRC-32 once it is read whole."""
         info = self.members.get(name)
         if info is None:
             raise ConfigError(self.path, name, "missing from the zip")
         if info.file_size > limit:
-            raise ConfigError(self.path, name, f"larger than {limit // 2**20} MiB; refused")
-        with zipfile.ZipFile(self.path) as archive, archive.open(info) as handle:
-            data = handle.read(limit + 1)  # the header's size may lie: never read past the limit
+            raise ConfigError(self.path, name, f"larger than {size_text(limit)}; refused")
+        try:
+            with self._archive.open(info) as handle:
+                data = handle.read(limit + 1)  # zipfile stops at the header's size and checks the CRC there
+        except ZIP_DAMAGE as exc:
+            raise ConfigError(self.path, name, f"{zip_damage(exc)}; refused") from None
         if len(data) > limit:
-            raise ConfigError(self.path, name, f"larger than {limit // 2**20} MiB; refused")
+            raise ConfigError(self.path, name, f"larger than {size_text(limit)}; refused")
+        if len(data) != info.file_size:  # zipfile stops early, without a word, when the header says more
+            raise ConfigError(self.path, name, f"{zip_damage(zipfile.BadZipFile('size'))}; refused")
         return data
 
     def json(self, name: str) -> Any:
         """A JSON member, parsed."""
-        try:
-            return json.loads(self._read(name, MAX_JSON_BYTES))
-        except (UnicodeDecodeError, json.JSONDecodeError, RecursionError):
-            raise ConfigError(self.path, name, "not valid JSON") from None
+        return parse_json(self.read(name, MAX_JSON_BYTES), self.path, name)
 
     def has(self, name: str) -> bool:
         return name in self.members
 
     def tensors(self, name: str, device: str = "cpu") -> Any:
-        """A ``.pth`` member as tensors and plain containers (weights only: no code runs)."""
-        import io
-
+        """A ``.pth`` member as tensors and plain containers (weights only: no code runs), every
+        floating value finite; bounded before and after ``torch.load`` (see the module's caps)."""
         import torch
 
-        data = self._read(name, MAX_WEIGHTS_BYTES)
+        data = self.read(name, MAX_WEIGHTS_BYTES)
+        try:  # torch's format is a zip: its records counted, its pickle bounded, before torch reads it
+            archive = open_zip(data, self.path, name, MAX_TENSOR_RECORDS, MAX_TENSOR_RECORDS * 256, "torch's zip format")
+        except ConfigError as error:
+            raise ConfigError(self.path, name, f"not plain weights ({error.problem}); refused") from None
+        with archive:
+            pickles = [info for info in archive.infolist() if info.filename.endswith(".pkl")]
+        if not pickles or any(info.file_size > MAX_PICKLE_BYTES for info in pickles):
+            raise ConfigError(self.path, name, f"not plain weights (no pickle, or one over {size_text(MAX_PICKLE_BYTES)}); refused")
         try:
-            return torch.load(io.BytesIO(data), map_location=device, weights_only=True)
+            value = torch.load(io.BytesIO(data), map_location=device, weights_only=True)
         except Exception as exc:  # torch raises UnpicklingError, RuntimeError and more for a bad file
             raise ConfigError(self.path, name, f"not plain weights ({type(exc).__name__}); refused") from None
+        check_tensors(value, self.path, name, MAX_WEIGHTS_BYTES)
+        return value
+
+    def close(self) -> None:
+        """Let go of the zip's bytes (members can no longer be read); the manifest stays."""
+        self._archive.close()
+        self._archive = zipfile.ZipFile(io.BytesIO(_EMPTY_ZIP))
 
     def normalizer(self, size: int) -> Normalizer | None:
         """The normaliser, validated for observations of ``size`` values, or None if there is none."""
         if not self.has(NORMALIZER):
             return None
         return Normalizer.from_json(self.json(NORMALIZER), size, self.path)
+
+
+def check_tensors(value: Any, source: str | Path, name: str, limit: int) -> int:
+    """The bytes the tensors in ``value`` (nested in dicts, lists and tuples) span, refused in one
+    line when they add up to more than ``limit`` (a view can repeat one small storage endlessly:
+    the size is counted before any value is looked at), are not plain dense tensors, or hold a
+    NaN or an infinity (so do plain floats beside them, an optimiser's betas say)."""
+    import torch
+
+    def refuse(problem: str) -> ConfigError:
+        return ConfigError(source, name, f"{problem}; refused")
+
+    tensors: list[tuple[str, Any]] = []
+    floats: list[tuple[str, float]] = []
+    total = 0
+    stack: list[tuple[str, Any]] = [("", value)]
+    while stack:
+        where, item = stack.pop()
+        if isinstance(item, torch.Tensor):
+            if item.layout != torch.strided or item.is_quantized or item.device.type == "meta":
+                raise refuse(f"{where or 'the value'} is not a plain dense tensor")
+            total += item.numel() * item.element_size()
+            if total > limit:
+                raise refuse(f"its tensors span more than {size_text(limit)}")
+            tensors.append((where, item))
+        elif isinstance(item, dict):
+            stack.extend((f"{where}.{key}" if where else str(key), child) for key, child in item.items())
+        elif isinstance(item, (list, tuple)):
+            stack.extend((f"{where}[{i}]", child) for i, child in enumerate(item))
+        elif isinstance(item, float):
+            floats.append((where, item))
+    for where, item in tensors:
+        if (item.is_floating_point() or item.is_complex()) and not bool(torch.isfinite(item).all()):
+            raise refuse(f"{where or 'the tensor'} holds NaN or infinite values")
+    for where, item in floats:
+        if not math.isfinite(item):
+            raise refuse(f"{where or 'the value'} is {item}, not a finite number")
+    return total
 
 
 def read_manifest(path: str | Path) -> dict[str, Any]:
@@ -254,13 +350,14 @@ def read_manifest(path: str | Path) -> dict[str, Any]:
 
 def update_manifest(path: str | Path, extra: dict[str, Any]) -> Path:
     """Add keys to a policy zip's manifest (the zip is rebuilt and swapped in atomically)."""
-    manifest = {**read_manifest(path), **extra}
+    source = PolicyFile(path)  # read through the same bounds as any policy
+    manifest = {**source.raw_manifest, **extra}
     Manifest.model_validate(manifest)
 
     def write(tmp: Path) -> None:
-        with zipfile.ZipFile(path) as source, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as target:
-            for item in source.infolist():
-                data = json.dumps(manifest, indent=2).encode() if item.filename == MANIFEST else source.read(item)
+        with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as target:
+            for name, item in source.members.items():
+                data = json.dumps(manifest, indent=2).encode() if name == MANIFEST else source.read(name)
                 target.writestr(item, data)
 
     return atomic_write(Path(path), write)

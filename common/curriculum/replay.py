@@ -1,8 +1,8 @@
 """SAC and TD3 replay buffers as plain arrays (``.npz``), so resuming a run never unpickles.
 
 stable-baselines3 saves a replay buffer by pickling the whole object; here only its arrays and
-two counters are written, and read back with ``allow_pickle=False`` into the buffer of a model
-built from the curriculum, after checking every array's shape and type against that buffer.
+two counters are written, and read back without pickles into the buffer of a model built from
+the curriculum, after checking every array's shape and type against that buffer.
 """
 
 from __future__ import annotations
@@ -14,6 +14,9 @@ import numpy as np
 
 from common.atomic import atomic_write
 from common.errors import ConfigError
+from common.files import ZIP_DAMAGE, open_regular, open_zip, zip_damage
+
+_CHUNK = 1024 * 1024
 
 _ARRAYS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
 
@@ -33,33 +36,91 @@ def save_replay(buffer, path: str | Path) -> Path:
     return atomic_write(Path(path), write)
 
 
+_SLACK = 64 * 1024  # a file's bytes beyond its arrays': zip records and .npy headers (about 250 bytes a member)
+
+
 def load_replay(buffer, path: str | Path) -> None:
-    """Fill ``buffer`` from a file :func:`save_replay` wrote; a file that does not fit it is refused."""
+    """Fill ``buffer`` from a file :func:`save_replay` wrote; a file that does not fit it is refused.
+
+    The file is read through :mod:`common.files` (a regular file no larger than the buffer's
+    arrays and their headers); each array's header is checked against the buffer's array (shape,
+    type, order) before its data is read, straight into the buffer, and its CRC-32 once read.
+    """
     path = Path(path)
     expected = _arrays(buffer)
 
     def refuse(problem: str) -> ConfigError:
         return ConfigError(path, None, f"{problem}; not this stage's replay buffer (delete it to resume without one)")
 
-    try:
-        with np.load(path, allow_pickle=False) as saved:
-            names = set(saved.files)
-            if names != set(expected) | {"pos", "full"}:
-                raise refuse(f"holds {sorted(names)}")
-            sizes = {info.filename.removesuffix(".npy"): info.file_size for info in saved.zip.infolist()}
+    limit = sum(array.nbytes for array in expected.values()) + _SLACK
+    with open_regular(path, limit, "this stage's replay buffer",
+                      too_large="more than this stage's buffer holds; not its replay buffer (delete it to resume without one)") as handle:
+        with open_zip(handle, path, None, len(expected) + 2, _SLACK, "this stage's replay buffer") as archive:
+            members = {info.filename.removesuffix(".npy"): info for info in archive.infolist()}
+            if set(members) != set(expected) | {"pos", "full"} or len(members) != len(archive.infolist()):
+                raise refuse(f"holds {sorted(members)[:10]}")
             for name, array in expected.items():
-                # The header's size is checked before reading, so a crafted file cannot claim memory.
-                if sizes[name] > array.nbytes + 4096:
-                    raise refuse(f"{name} is larger than the buffer")
-                value = saved[name]
-                if value.shape != array.shape or value.dtype != array.dtype:
-                    raise refuse(f"{name} is {value.shape} {value.dtype}, the buffer {array.shape} {array.dtype}")
-                array[...] = value
-            pos, full = int(saved["pos"]), bool(saved["full"])
-    except (OSError, ValueError, TypeError, zipfile.BadZipFile, KeyError) as exc:
-        if isinstance(exc, ConfigError):
-            raise
-        raise refuse(f"unreadable ({type(exc).__name__})") from None
+                _read_into(archive, members[name], array, refuse)
+            pos, full = (_read_scalar(archive, members[name], refuse) for name in ("pos", "full"))
+    if isinstance(pos, bool) or not isinstance(pos, int) or not isinstance(full, (bool, int)):
+        raise refuse("pos must be an integer and full a boolean")
     if not 0 <= pos < buffer.buffer_size:
         raise refuse(f"position {pos} outside the buffer")
-    buffer.pos, buffer.full = pos, full
+    buffer.pos, buffer.full = pos, bool(full)
+
+
+def _header(handle, name: str, refuse):
+    """A .npy member's (shape, fortran_order, dtype), read from its header alone."""
+    try:
+        version = np.lib.format.read_magic(handle)
+        if version == (1, 0):
+            return np.lib.format.read_array_header_1_0(handle)
+        if version == (2, 0):
+            return np.lib.format.read_array_header_2_0(handle)
+    except ZIP_DAMAGE as exc:
+        raise refuse(f"{name}: {zip_damage(exc) if isinstance(exc, zipfile.BadZipFile) else 'not a .npy array'}") from None
+    raise refuse(f"{name}: a .npy array of format {version}")
+
+
+def _read_into(archive: zipfile.ZipFile, info: zipfile.ZipInfo, array: np.ndarray, refuse) -> None:
+    """Read a member straight into ``array`` once its size and header fit it (no copy, no pickle)."""
+    name = info.filename
+    # The header's size is checked before reading, so a crafted file cannot claim memory.
+    if info.file_size > array.nbytes + 4096:
+        raise refuse(f"{name} is larger than the buffer")
+    try:
+        with archive.open(info) as handle:
+            shape, fortran, dtype = _header(handle, name, refuse)
+            if shape != array.shape or dtype != array.dtype or (fortran and array.ndim > 1) or not array.flags.c_contiguous:
+                raise refuse(f"{name} is {shape} {dtype}, the buffer {array.shape} {array.dtype}")
+            view, done = memoryview(array.reshape(-1).view(np.uint8)), 0
+            while done < array.nbytes:
+                got = handle.readinto(view[done:done + _CHUNK])
+                if not got:
+                    raise refuse(f"{name} ends before its {array.nbytes:,} bytes")
+                done += got
+            if handle.read(4097):  # reading to its end checks the CRC-32 too
+                raise refuse(f"{name} holds more than its array")
+            if handle.tell() != info.file_size:  # zipfile stops early, without a word, when the header says more
+                raise refuse(f"{name}: {zip_damage(zipfile.BadZipFile('size'))}")
+    except ZIP_DAMAGE as exc:
+        if isinstance(exc, ConfigError):
+            raise
+        raise refuse(f"{name}: {zip_damage(exc)}") from None
+
+
+def _read_scalar(archive: zipfile.ZipFile, info: zipfile.ZipInfo, refuse):
+    """A 0-d integer or boolean member (pos, full) as a Python value."""
+    if info.file_size > 4096:
+        raise refuse(f"{info.filename} is not a number")
+    try:
+        with archive.open(info) as handle:
+            value = np.lib.format.read_array(handle, allow_pickle=False)
+            handle.read()  # to its end: the CRC-32 is checked there
+    except ZIP_DAMAGE as exc:
+        if isinstance(exc, ConfigError):
+            raise
+        raise refuse(f"{info.filename}: {zip_damage(exc) if isinstance(exc, zipfile.BadZipFile) else 'not a .npy array'}") from None
+    if value.shape != () or value.dtype.kind not in "biu":
+        raise refuse(f"{info.filename} is {value.shape} {value.dtype}, not a number")
+    return value.item()

@@ -19,17 +19,21 @@ its own left behind, and never touches a directory that is not empty and not mar
 from __future__ import annotations
 
 import csv
+import io
 import json
+import math
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
 from common.atomic import atomic_write
 from common.errors import ConfigError
+from common.files import read_bytes, read_text
 
 LOCK_NAME = ".lock"
 MARKER = ".nav-curriculum-run"
 _PREPARED = {"config.yaml", "run.json", "state.json", "eval.csv"}  # what a run writes before training
+MAX_EVAL_BYTES = 32 * 1024 * 1024  # eval.csv: about 100 bytes a row
 EVAL_FIELDS = ["stage", "timesteps", "wall_time", "success_rate", "collision_rate", "timeout_rate", "stuck_rate",
                "spl", "mean_steps"]
 
@@ -80,14 +84,28 @@ class EvalLog:
     def __init__(self, path: Path) -> None:
         self.path = path
         header = (",".join(EVAL_FIELDS) + "\n").encode()
-        data = path.read_bytes() if path.exists() else b""
+        data = read_bytes(path, MAX_EVAL_BYTES, "this run's eval.csv") if path.exists() else b""
         if not data.endswith(b"\n"):
             whole = data[: data.rfind(b"\n") + 1] or header
             atomic_write(path, lambda tmp: tmp.write_bytes(whole))
+        self.rows()  # a damaged log is refused now, before any training
 
     def rows(self) -> list[dict]:
-        with self.path.open(newline="") as handle:
-            return list(csv.DictReader(handle))
+        """The rows, each checked: a stage name, whole timesteps, finite wall time and rates."""
+        text = read_text(self.path, MAX_EVAL_BYTES, "this run's eval.csv")
+        reader = csv.DictReader(io.StringIO(text))
+        if reader.fieldnames != EVAL_FIELDS:
+            raise ConfigError(self.path, "line 1", f"expected the header {','.join(EVAL_FIELDS)}")
+        rows = list(reader)
+        for line, row in enumerate(rows, start=2):
+            try:
+                good = bool(row["stage"]) and int(row["timesteps"]) >= 0 and all(
+                    math.isfinite(float(row[key])) for key in ("wall_time", "success_rate"))
+            except (TypeError, ValueError):
+                good = False
+            if not good:
+                raise ConfigError(self.path, f"line {line}", "not an evaluation row this project writes; the log is damaged")
+        return rows
 
     def truncate(self, stage: str, timesteps: int) -> None:
         keep = [r for r in self.rows() if r["stage"] != stage or int(r["timesteps"]) <= timesteps]
@@ -134,7 +152,7 @@ def unstarted(out: Path) -> bool:
     names = {p.name for p in out.iterdir()} - {LOCK_NAME, MARKER}
     if not names or not names - {"stages"} <= _PREPARED or not (out / "state.json").exists():
         return False
-    if (out / "eval.csv").exists() and len((out / "eval.csv").read_text().splitlines()) > 1:
+    if (out / "eval.csv").exists() and len(read_text(out / "eval.csv", MAX_EVAL_BYTES).splitlines()) > 1:
         return False
     stages = out / "stages"
     # Before its first checkpoint a stage holds at most its TensorBoard log.

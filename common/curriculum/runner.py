@@ -11,7 +11,6 @@ command (or ``--resume``) starts it afresh.
 
 from __future__ import annotations
 
-import json
 import platform
 import subprocess
 import time
@@ -69,6 +68,17 @@ def _make_env_kwargs(stage: StageSpec) -> dict:
     world = spec.kind or spec.mix or spec.suite or spec.file
     return dict(world=world, observation=stage.observation, reward=stage.reward, max_steps=stage.max_steps,
                 difficulty=spec.difficulty, action_mapping=stage.action_mapping, **stage.env_kwargs)
+
+
+def _is_state(state: object, config: CurriculumConfig) -> bool:
+    """Whether ``state`` is what a run of ``config`` writes: done stages (in order, each with its
+    result) and results by stage name."""
+    if not isinstance(state, dict) or not isinstance(state.get("done"), list) or not isinstance(state.get("stages"), dict):
+        return False
+    names = [stage.name for stage in config.stages]
+    done, results = state["done"], state["stages"]
+    return (done == names[: len(done)] and all(isinstance(results.get(name), dict) for name in done)
+            and set(results) <= set(names))
 
 
 def _purge_tensorboard_after(log_dir: Path, run_name: str, step: int) -> None:
@@ -129,6 +139,8 @@ class Runner:
             raise
 
     def _open(self) -> dict:
+        from common.files import MAX_STATE_BYTES, read_json
+
         state_path = self.out / "state.json"
         if not is_marked(self.out):
             mark(self.out)  # before anything else is written
@@ -141,7 +153,10 @@ class Runner:
             saved = read_yaml(self.out / "config.yaml")
             if saved != self.config.model_dump(mode="json"):
                 raise ConfigError(self.out, "config.yaml", "the curriculum changed since this run started; resume it with the same file")
-            state = json.loads(state_path.read_text())
+            state = read_json(state_path, MAX_STATE_BYTES, "this run's state.json")
+            if not _is_state(state, self.config):
+                raise ConfigError(state_path, None, "not the state this project writes (done stages, their results); "
+                                  "the run directory is damaged")
         else:
             if any(p.name not in (LOCK_NAME, MARKER) for p in self.out.iterdir()):
                 raise ConfigError(self.out, None, "the run directory is not empty; pass --resume to continue it or choose another --out")
@@ -153,7 +168,10 @@ class Runner:
         self.eval_log = EvalLog(self.out / "eval.csv")
         # The commit the run started from is the code that trains every stage, even when a
         # policy is saved (or the run resumed) after later commits.
-        self.commit = json.loads((self.out / "run.json").read_text())["git_commit"]
+        provenance = read_json(self.out / "run.json", MAX_STATE_BYTES, "this run's run.json")
+        if not isinstance(provenance, dict) or not isinstance(provenance.get("git_commit", 0), (str, type(None))):
+            raise ConfigError(self.out / "run.json", "git_commit", "missing; the run directory is damaged")
+        self.commit = provenance["git_commit"]
         return state
 
     def release(self) -> None:
