@@ -132,3 +132,24 @@ def test_render_to_a_directory_is_one_line(tmp_path, capsys):
     assert main(["render", "--agent", "go_to_goal", "--max-steps", "5", "--out", str(tmp_path)]) == 2
     error = capsys.readouterr().err
     assert error.count("\n") == 1 and str(tmp_path) in error
+
+
+@pytest.mark.parametrize("name, content, expected", [
+    ("state.json", "{}\n", "not the state this project writes"),
+    ("state.json", '{"done": ["sparse"], "stages": {}}\n', "not the state this project writes"),
+    ("run.json", '{"seed": 0}\n', "run.json: git_commit: missing"),
+    ("eval.csv", "stage,timesteps\nopen,1024\n", "eval.csv: line 1: expected the header"),
+    ("eval.csv", None, "eval.csv: line 3: not an evaluation row"),
+])
+def test_a_damaged_run_state_is_refused_in_one_line_on_resume(tmp_path, capsys, name, content, expected):
+    out = tmp_path / "run"
+    runner = Runner(load_curriculum(TINY), out)
+    runner.prepare()
+    runner.eval_log.append({"stage": "open", "timesteps": 1024, "wall_time": 1.0, "success_rate": 0.5})
+    runner.release()
+    if content is None:
+        content = (out / name).read_text() + "open,2048,nan,0.5,0,0,0,0,\n"
+    (out / name).write_text(content)
+    assert main(["run", str(TINY), "--out", str(out), "--resume", "--no-progress"]) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and expected in error
