@@ -88,7 +88,6 @@ class EvalLog:
         if not data.endswith(b"\n"):
             whole = data[: data.rfind(b"\n") + 1] or header
             atomic_write(path, lambda tmp: tmp.write_bytes(whole))
-        self.rows()  # a damaged log is refused now, before any training
 
     def rows(self) -> list[dict]:
         """The rows, each checked: a stage name, whole timesteps, finite wall time and rates."""
