@@ -44,41 +44,26 @@ print(json.dumps({"code": code, "seconds": time.perf_counter() - began,
                   "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
 """
 
-# Loads a policy in a fresh process, as above, timing load_policy alone (torch and SB3 imported first).
-_LOAD = """
+# Loads a file in a fresh process, as above, timing the loader alone (what it imports first is not timed).
+_TIMED = """
 import json, resource, sys, time
 resource.setrlimit(resource.RLIMIT_AS, (4 << 30, 4 << 30))
-import stable_baselines3, torch  # noqa: F401
-from common.curriculum.policy import load_policy
+PRELOAD
+from LOADER import load
 from common.errors import ConfigError
 before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 began = time.perf_counter()
 try:
-    load_policy(sys.argv[1])
+    load(sys.argv[1])
     error = None
 except ConfigError as exc:
     error = str(exc)
 print(json.dumps({"error": error, "seconds": time.perf_counter() - began,
                   "grew_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024 - before}))
 """
-
-
-# Reads a YAML file in a fresh process, as above, timing read_yaml alone.
-_YAML = """
-import json, resource, sys, time
-resource.setrlimit(resource.RLIMIT_AS, (4 << 30, 4 << 30))
-from common.errors import ConfigError
-from common.yaml_io import read_yaml
-before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-began = time.perf_counter()
-try:
-    read_yaml(sys.argv[1])
-    error = None
-except ConfigError as exc:
-    error = str(exc)
-print(json.dumps({"error": error, "seconds": time.perf_counter() - began,
-                  "grew_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024 - before}))
-"""
+_LOAD = _TIMED.replace("PRELOAD", "import stable_baselines3, torch  # noqa: F401").replace(
+    "from LOADER import load", "from common.curriculum.policy import load_policy as load")
+_YAML = _TIMED.replace("PRELOAD", "").replace("from LOADER import load", "from common.yaml_io import read_yaml as load")
 
 
 def _in_process(script: str, *args: str, timeout: float = 60) -> tuple[dict, str]:
