@@ -93,10 +93,6 @@ class NavigationEnv(gym.Env):
             self.actions = ActionMapping(scenario.robot, self.action_mapping)
         self._goal = scenario.goal
 
-    def _bearing(self, readings: Readings) -> float:
-        x, y, yaw = readings.pose
-        return wrap_angle(math.atan2(self._goal[1] - y, self._goal[0] - x) - yaw)
-
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
         """Start an episode; ``options={"resample": True}`` redraws a random world file's layout
         (IR-SIM's ``reset(random=True)``) where a plain reset restores its initial state."""
@@ -126,8 +122,9 @@ class NavigationEnv(gym.Env):
         task, previous = self.task, self.task.distance
         outcome = task.step(readings)
         reached = outcome == "success"
-        ctx = StepContext(task.distance, previous, self._bearing(readings), v, w, nearest_return(readings.lidar),
-                          readings.collided, reached)
+        x, y, yaw = readings.pose
+        bearing = wrap_angle(math.atan2(self._goal[1] - y, self._goal[0] - x) - yaw)
+        ctx = StepContext(task.distance, previous, bearing, v, w, nearest_return(readings.lidar), readings.collided, reached)
         reward, shares = self.reward(ctx)
         # A crash is a termination, not a truncation: its value must not bootstrap from the next state.
         terminated = reached or outcome == "collision"

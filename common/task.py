@@ -62,7 +62,8 @@ class Task:
     Args:
         goal_threshold: the goal radius (see the module); None: each scenario's own.
         max_steps: steps before a timeout.
-        judge_stuck: end an episode that stopped making way (the evaluator's rule).
+        judge_stuck: end an episode that stopped making way (the evaluator's rule), measuring
+            the path driven on the way (``travelled``; training needs neither).
     """
 
     def __init__(self, goal_threshold: GoalThreshold = None, max_steps: int = DEFAULT_MAX_STEPS,
@@ -97,10 +98,11 @@ class Task:
         """Account for one step that led to ``readings``; the episode's outcome if it ended."""
         x, y = readings.pose[0], readings.pose[1]
         self.steps += 1
-        self.travelled += math.hypot(x - self._position[0], y - self._position[1])
-        self._position = (x, y)
-        self.distance = math.hypot(self.goal[0] - x, self.goal[1] - y)
-        if self.distance < self.radius:
+        if self.judge_stuck:
+            self.travelled += math.hypot(x - self._position[0], y - self._position[1])
+            self._position = (x, y)
+        self.distance = distance = math.hypot(self.goal[0] - x, self.goal[1] - y)
+        if distance < self.radius:
             return "success"
         if readings.collided:
             return "collision"
