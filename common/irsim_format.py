@@ -35,10 +35,10 @@ from pathlib import Path
 from typing import Any, Callable, Hashable, NamedTuple
 
 import numpy as np
-from common.kernel_cache import kernel
 from pydantic import BaseModel, ValidationError
 
 from common.errors import ConfigError, quote
+from common.kernel_cache import kernel
 from common.polygons import is_simple_polygon
 from common.scenario import (
     MAX_OBSTACLES,

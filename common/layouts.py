@@ -29,8 +29,8 @@ from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
-from common.kernel_cache import kernel
 
+from common.kernel_cache import kernel
 from common.placement import BOX, CIRCLE, OUTLINE_POINTS, place
 
 CIRCLE_NEAR, CIRCLE_ANY, MIXED_NEAR, MIXED_ANY, SHELF, PILLAR, CRATE = range(7)

@@ -44,9 +44,9 @@ from typing import Callable
 
 import numpy as np
 from gymnasium import spaces
-from common.kernel_cache import kernel
 
 from common.errors import ConfigError, quote
+from common.kernel_cache import kernel
 from common.kinematics import wrap_angle
 from common.readings import Readings
 from common.scenario import LidarSpec, RobotProfile

@@ -11,10 +11,10 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
-from common.kernel_cache import kernel
 from scipy import ndimage
 
 from common.geometry import box_distance, circle_distance, segment_distance
+from common.kernel_cache import kernel
 from common.placement import BOX, CIRCLE, shape_bounds
 from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, WorldSpec
 

@@ -11,9 +11,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from common.kernel_cache import kernel
 
 from common.geometry import box_distance, circle_distance
+from common.kernel_cache import kernel
 
 CIRCLE, BOX = 0, 1
 

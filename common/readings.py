@@ -6,8 +6,8 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from common.kernel_cache import kernel
 
+from common.kernel_cache import kernel
 from common.kinematics import Pose2D
 
 

@@ -11,10 +11,10 @@ from __future__ import annotations
 
 
 import numpy as np
-from common.kernel_cache import kernel
 from numba.extending import register_jitable
 
 from common.geometry import box_distance, segment_distance
+from common.kernel_cache import kernel
 from common.polygons import orientation
 from flatland.lidar import slab
 

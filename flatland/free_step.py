@@ -10,9 +10,9 @@ functions that path calls (compiled from the same source), so both compute the s
 from __future__ import annotations
 
 import numpy as np
-from common.kernel_cache import kernel
 from numba.extending import register_jitable
 
+from common.kernel_cache import kernel
 from common.kinematics import Pose2D, body_velocity, unicycle_euler, unicycle_exact, wheel_speeds
 from flatland.clearance import path_clear, swept_capsule
 from flatland.lidar import cast_scan, sensor_origin

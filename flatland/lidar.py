@@ -11,9 +11,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from common.kernel_cache import kernel
 from numba.extending import register_jitable
 
+from common.kernel_cache import kernel
 from common.scenario import LidarSpec
 
 _EPS = 1e-9  # a hit nearer than this is the sensor's own surface, not an obstacle

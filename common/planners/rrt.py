@@ -9,8 +9,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from common.kernel_cache import kernel
 
+from common.kernel_cache import kernel
 from common.occupancy import OccupancyGrid
 from common.planners.base import Point, grid_arrays
 from common.planners.collision import segment_free_sampled

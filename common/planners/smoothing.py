@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
-from common.kernel_cache import kernel
 
+from common.kernel_cache import kernel
 from common.occupancy import OccupancyGrid
 from common.planners.base import grid_arrays
 from common.planners.collision import line_of_sight
