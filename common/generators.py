@@ -10,19 +10,21 @@ checked reachable by the robot's footprint on a 0.1 m grid; a layout that fails 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Callable, Iterator, Literal
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterator, Literal
 
 import numpy as np
 
 from common.errors import ConfigError, quote
+from common import moving_kinds
 from common.layouts import CIRCLE_ANY, CIRCLE_NEAR, CRATE, MIXED_ANY, MIXED_NEAR, PILLAR, SHELF, Layout, Step, lay_out
 from common.occupancy import goal_reachable, path_exists, shapes_grid
 from common.placement import CIRCLE
 from common.scenario import BoxObstacle, CircleObstacle, Obstacle, Scenario
 
 Split = Literal["train", "eval"]
-KINDS = ("open", "sparse", "cluttered", "warehouse", "trap")
+KINDS = ("open", "sparse", "cluttered", "warehouse", "trap", "crowd", "warehouse_moving")
+MOVING_KINDS = ("crowd", "warehouse_moving")
 _SPLIT_IDS = {"train": 0, "eval": 1}
 _MAX_ATTEMPTS = 200
 
@@ -120,28 +122,38 @@ def _checked(template: Scenario, start: tuple, goal: tuple, obstacles: list[Obst
 
 
 # Each returns (start, goal, obstacles) already checked (clear and reachable), or None to redraw.
-_GENERATORS: dict[str, Callable[[Scenario, np.random.Generator, float], tuple | None]] = {
+_GENERATORS: dict[str, Callable[..., tuple | None]] = {
     "open": _open, "sparse": _sparse, "cluttered": _cluttered, "warehouse": _warehouse, "trap": _trap,
+    "crowd": moving_kinds.crowd, "warehouse_moving": moving_kinds.warehouse_moving,
 }
+OPTIONS = ("reacting", "behavior")  # what a moving kind's variants may set
 
 
 def generate(kind: str, seed: int, difficulty: float = 0.5, split: Split = "train",
-             template: Scenario | None = None) -> Scenario:
+             template: Scenario | None = None, **options: Any) -> Scenario:
     """The scenario of ``kind`` for this seed, difficulty (0 to 1) and split.
 
     ``template`` supplies the robot, lidar, world size and goal threshold (defaults: a 10 m × 10 m
     walled world, a 0.2 m circular robot with v_max 1 m/s, w_max 1 rad/s, a 36-beam 5 m lidar).
     A template whose robot finds no layout (too wide for the world) is a :class:`ConfigError`
-    naming ``robot``.
+    naming ``robot``. ``options`` are a moving kind's variants (:mod:`common.moving_kinds`:
+    ``reacting``, ``behavior``).
     """
     if kind not in _GENERATORS:
         raise ConfigError(None, "kind", f"unknown scenario kind {quote(kind)}; allowed: {', '.join(KINDS)}")
     if not 0.0 <= difficulty <= 1.0:
         raise ConfigError(None, "difficulty", f"{difficulty} is outside [0, 1]")
+    for name in options:
+        if kind not in MOVING_KINDS or name not in OPTIONS:
+            raise ConfigError(None, name, f"not an option of the {kind} kind; allowed: "
+                              f"{', '.join(OPTIONS) if kind in MOVING_KINDS else 'none'}")
     template = template or Scenario()
+    if kind in MOVING_KINDS:  # movers pass through each other; the robot stops on any contact
+        template = template.model_copy(update={"world": template.world.model_copy(
+            update={"collision_mode": "unobstructed_obstacles"})})
     rng = np.random.default_rng([seed, KINDS.index(kind), _SPLIT_IDS[split]])
     for _ in range(_MAX_ATTEMPTS):
-        layout = _GENERATORS[kind](template, rng, difficulty)
+        layout = _GENERATORS[kind](template, rng, difficulty, **options)
         if layout is None:
             continue
         start, goal, obstacles = layout
@@ -165,23 +177,29 @@ def _valid(scenario: Scenario) -> bool:
 
 @dataclass(frozen=True)
 class Suite:
-    """A named, reproducible list of evaluation scenarios: (generator kind, count, base seed)."""
+    """A named, reproducible list of evaluation scenarios: (generator kind, count, base seed), and
+    the kind's options (a moving kind's variant)."""
 
     name: str
     kind: str
     count: int = 100
     base_seed: int = 0
     difficulty: float = 0.5
+    options: tuple[tuple[str, Any], ...] = field(default=())
 
     def scenarios(self, count: int | None = None, seed: int = 0, template: Scenario | None = None) -> Iterator[Scenario]:
         """Yield the suite's scenarios; ``seed`` shifts the base seed, ``count`` overrides its length."""
         for i in range(self.count if count is None else count):
-            yield generate(self.kind, self.base_seed + seed + i, self.difficulty, "eval", template)
+            yield generate(self.kind, self.base_seed + seed + i, self.difficulty, "eval", template, **dict(self.options))
 
 
 SUITES: dict[str, Suite] = {
     kind: Suite(name=kind, kind=kind, difficulty=1.0 if kind == "warehouse" else 0.5) for kind in KINDS
 }
+# The crowd as the robot's targets are set: 12 people at 0.5-1.2 m/s who all see the robot; and the
+# same people blind to it (the hard case).
+SUITES["crowd"] = Suite(name="crowd", kind="crowd", options=(("reacting", True),))
+SUITES["crowd_unaware"] = Suite(name="crowd_unaware", kind="crowd", options=(("reacting", False),))
 
 
 def get_suite(name: str) -> Suite:

@@ -1,4 +1,5 @@
-"""Vectorised signed distances from points to obstacle shapes (negative inside).
+"""Vectorised signed distances from points to obstacle shapes (negative inside), and the gaps
+between segments and boxes.
 
 Used for scenario validation, non-overlap in the generators and ground-truth occupancy grids,
 so every consumer agrees on what "inside an obstacle" means. The circle and box distances are
@@ -12,6 +13,7 @@ import math
 import numpy as np
 
 from common.kernel_cache import kernel
+from common.polygons import orientation
 
 
 @kernel
@@ -121,3 +123,44 @@ def points_in_polygon(points: np.ndarray, vertices: np.ndarray) -> np.ndarray:
                 crossings = not crossings
         inside[i] = crossings
     return inside
+
+
+@kernel(inline="always")
+def slab(p, q, half, t_near, t_far):
+    """Narrow [t_near, t_far] to where p + t q lies within [-half, half] (empty: t_near > t_far)."""
+    if q == 0.0:
+        return (t_near, t_far) if abs(p) <= half else (math.inf, -math.inf)
+    t1, t2 = (-half - p) / q, (half - p) / q
+    return max(t_near, min(t1, t2)), min(t_far, max(t1, t2))
+
+
+@kernel
+def segments_gap(ax: float, ay: float, bx: float, by: float, cx: float, cy: float, dx: float, dy: float) -> float:
+    """Distance between the segments AB and CD (0 where they cross)."""
+    if (orientation(ax, ay, bx, by, cx, cy) * orientation(ax, ay, bx, by, dx, dy) < 0.0
+            and orientation(cx, cy, dx, dy, ax, ay) * orientation(cx, cy, dx, dy, bx, by) < 0.0):
+        return 0.0
+    # Apart (or touching, where an end lies on the other segment), the nearest pair has an end in it.
+    return min(segment_distance(ax, ay, cx, cy, dx, dy), segment_distance(bx, by, cx, cy, dx, dy),
+               segment_distance(cx, cy, ax, ay, bx, by), segment_distance(dx, dy, ax, ay, bx, by))
+
+
+@kernel
+def segment_box_gap(ax: float, ay: float, bx: float, by: float, cx: float, cy: float, c: float, s: float,
+                    half_length: float, half_width: float) -> float:
+    """Distance between the segment AB and a box (centre, yaw cosine and sine, half sides); 0 where
+    the segment enters it."""
+    ux, uy = c * (ax - cx) + s * (ay - cy), -s * (ax - cx) + c * (ay - cy)
+    vx, vy = c * (bx - cx) + s * (by - cy), -s * (bx - cx) + c * (by - cy)
+    # The segment's parameter range [0, 1] narrowed to the box's two slabs: anything left is inside.
+    low, high = slab(ux, vx - ux, half_length, 0.0, 1.0)
+    low, high = slab(uy, vy - uy, half_width, low, high)
+    if low <= high:
+        return 0.0
+    # Outside, the nearest pair is a segment end and the box, or a box corner and the segment.
+    length, width = 2.0 * half_length, 2.0 * half_width
+    gap = min(box_distance(ax, ay, cx, cy, length, width, c, s), box_distance(bx, by, cx, cy, length, width, c, s))
+    for kx, ky in ((half_length, half_width), (-half_length, half_width), (-half_length, -half_width),
+                   (half_length, -half_width)):
+        gap = min(gap, segment_distance(kx, ky, ux, uy, vx, vy))
+    return gap

@@ -1,14 +1,17 @@
 """Read an IR-SIM world YAML (the 2.x schema) as a project :class:`Scenario`.
 
-The goal is parity with IR-SIM's ``stop`` collision mode: the same start, limits, lidar and
-obstacle geometry, so that ``flatland`` reproduces IR-SIM's poses and scans. Facts about IR-SIM
-(defaults, key names, fan-out and random placement) follow IR-SIM 2.12.
+The goal is parity with IR-SIM: the same start, limits, lidar, obstacle geometry and moving
+objects, so that ``flatland`` reproduces IR-SIM's poses, scans and movers. Facts about IR-SIM
+(defaults, key names, fan-out, random placement, behaviours) follow IR-SIM 2.12.
 
 Mapping, and where it deliberately differs from IR-SIM:
 
 * The first robot (after expanding ``number``) is the controlled one and must use
-  ``kinematics: {name: diff}``. Further robots, and every obstacle, become static obstacles at
-  their initial state: behaviours, kinematics and initial velocities of other objects are ignored.
+  ``kinematics: {name: diff}``. Further robots, and every obstacle, are obstacles at their initial
+  state; those IR-SIM moves (kinematics ``diff`` or ``omni`` and a ``behavior`` or a group's
+  ``group_behavior``) carry a :class:`~common.motion.spec.Motion` read by
+  :mod:`common.irsim_motion`, and move as IR-SIM moves them. The collision modes ``stop``,
+  ``unobstructed`` and ``unobstructed_obstacles`` are IR-SIM's.
 * IR-SIM builds circles as 64-gons (a buffered point); here they stay circles, read by an exact
   ray-circle test and collided with as circles, which is what keeps IR-SIM's typical worlds of
   many small circles fast. A 64-gon's edges lie inside its circle by at most r (1 - cos(pi / 64)),
@@ -17,13 +20,13 @@ Mapping, and where it deliberately differs from IR-SIM:
   rectangles and lines match IR-SIM to rounding.
 * Without a lidar2d sensor the scenario still gets a lidar with IR-SIM's lidar2d defaults,
   because every project scenario carries one.
-* Random placement (``distribution: random``) and random shapes use ``np.random.default_rng(seed)``
-  with IR-SIM's draw order (robot groups, then obstacle groups; per group states, goals, then each
-  object's shape), so the result equals ``irsim.make(path, seed=seed)`` unless a ``wander``
-  behaviour draws from the same generator first.
-* Keys IR-SIM knows but a static stop-mode world does not need (colours, plots, behaviours,
-  contact-mode physics, ...) are accepted and ignored; unknown keys and values that would change
-  the controlled robot's motion in a way flatland cannot model are a :class:`ConfigError`.
+* Random placement (``distribution: random``), random shapes and wandering goals use
+  ``np.random.default_rng(seed)`` with IR-SIM's draw order (robot groups, then obstacle groups;
+  per group states, goals, then each object's shape and its first wandering goal), so the result
+  equals ``irsim.make(path, seed=seed)``; :func:`parse_irsim_drawing` hands the generator on.
+* Keys IR-SIM knows but flatland does not need (colours, plots, contact-mode physics, ...) are
+  accepted and ignored; unknown keys and values that would move something in a way flatland
+  cannot model are a :class:`ConfigError`.
 """
 
 from __future__ import annotations
@@ -35,10 +38,31 @@ from pathlib import Path
 from typing import Any, Callable, Hashable, NamedTuple
 
 import numpy as np
-from pydantic import BaseModel, ValidationError
+from pydantic import ValidationError
 
 from common.errors import ConfigError, quote
+from common.irsim_values import (
+    Entry,
+    Value,
+    boolean,
+    build_model,
+    check_keys,
+    fail,
+    fit3,
+    join,
+    mapping_of,
+    number_list,
+    ordered_bounds,
+    point_list,
+    real,
+    string,
+    value_of,
+    values_of,
+    whole,
+)
+from common.irsim_motion import moves, needs_tracking, read_motion
 from common.kernel_cache import kernel
+from common.motion.spec import Motion
 from common.polygons import is_simple_polygon
 from common.scenario import (
     MAX_OBSTACLES,
@@ -59,6 +83,7 @@ WORLD_KEYS = (
     "collision_mode", "gravity", "friction", "restitution", "drive_tau", "obstacle_map", "mdownsample",
     "fog_map", "fog_map_resolution", "plot", "status",
 )
+COLLISION_MODES = ("stop", "unobstructed", "unobstructed_obstacles")  # IR-SIM's reactive and contact: not modelled
 OBJECT_KEYS = (
     "shape", "kinematics", "state", "velocity", "goal", "role", "color", "static", "mass", "friction",
     "inertia", "restitution", "vel_min", "vel_max", "acce", "angle_range", "behavior", "group_behavior",
@@ -95,13 +120,6 @@ MAX_BEAMS = 4096
 _MARGIN = 0.5  # IR-SIM keeps default random and circle placements this far inside the world
 
 
-class _Value(NamedTuple):
-    """A YAML value and the field path that names it in error messages."""
-
-    value: Any
-    path: str
-
-
 class _Shape(NamedTuple):
     """A body-frame outline: ``circle`` (points = [centre], radius), ``rectangle`` (points =
     [centre], length, width), ``polygon`` or ``linestring`` (points = vertices)."""
@@ -113,7 +131,6 @@ class _Shape(NamedTuple):
     width: float = 0.0
 
 
-Entry = dict[str, _Value]  # one object's keys after IR-SIM's per-object fan-out
 
 
 class ReadCache:
@@ -146,6 +163,7 @@ class _Draws:
     reads already done."""
 
     def __init__(self, seed: int | None, reads: ReadCache) -> None:
+        self.seed = seed
         self.rng = np.random.default_rng(seed)
         self.reads = reads
         self._left = {"objects": MAX_OBJECTS, "vertices": MAX_TOTAL_VERTICES, "checks": MAX_PLACEMENT_CHECKS}
@@ -158,131 +176,11 @@ class _Draws:
         """Take ``amount`` of ``what`` from the budget, or fail naming ``path``."""
         self._left[what] -= amount
         if self._left[what] < 0:
-            raise _fail(path, f"the file needs more than {_LIMITS[what]} in all; allowed: {advice}")
+            raise fail(path, f"the file needs more than {_LIMITS[what]} in all; allowed: {advice}")
 
 
 _LIMITS = {"objects": f"{MAX_OBJECTS:,} objects", "vertices": f"{MAX_TOTAL_VERTICES:,} polygon vertices",
            "checks": f"{MAX_PLACEMENT_CHECKS:,} random-placement spacing checks"}
-
-
-def _fail(path: str | None, problem: str) -> ConfigError:
-    # Raised without a source; parse_irsim attributes every error to the file at the end.
-    return ConfigError(None, path, problem)
-
-
-def _join(path: str, key: str) -> str:
-    return f"{path}.{key}" if path else key
-
-
-# -- scalar and vector checks ------------------------------------------------------------------
-
-
-def _is_number(value: Any) -> bool:
-    # The exact-type test first: an abstract-class check costs a microsecond, and a random world
-    # file has thousands of numbers to read per layout.
-    return type(value) in (float, int) or (isinstance(value, numbers.Real) and not isinstance(value, bool))
-
-
-def _number(value: Any, path: str, low: float | None = None, strict: bool = False, allow_inf: bool = False) -> float:
-    """A real number, finite unless ``allow_inf``, optionally bounded below (``strict``: exclusive)."""
-    if not _is_number(value):
-        raise _fail(path, f"expected a number (got {quote(value)})")
-    try:
-        value = float(value)
-    except OverflowError:  # an integer beyond any float
-        raise _fail(path, "expected a finite number (got an integer too large for a float)") from None
-    if math.isnan(value):
-        raise _fail(path, f"expected a number (got {quote(value)})")
-    if math.isinf(value) and not allow_inf:
-        raise _fail(path, f"expected a finite number (got {quote(value)})")
-    if low is not None and (value <= low if strict else value < low):
-        raise _fail(path, f"must be {'>' if strict else '>='} {low:g} (got {value:g})")
-    return value
-
-
-def _integer(value: Any, path: str, low: int, high: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise _fail(path, f"expected an integer (got {quote(value)})")
-    if not low <= value <= high:
-        raise _fail(path, f"must be >= {low} and <= {high} (got {value})")
-    return int(value)
-
-
-def _flag(value: Any, path: str) -> bool:
-    if not isinstance(value, bool):
-        raise _fail(path, f"expected true or false (got {quote(value)})")
-    return value
-
-
-def _text(value: Any, path: str, allowed: tuple[str, ...] | None = None) -> str:
-    if not isinstance(value, str):
-        raise _fail(path, f"expected a string (got {quote(value)})")
-    if allowed is not None and value not in allowed:
-        raise _fail(path, f"unsupported value {quote(value)}; allowed: {', '.join(allowed)}")
-    return value
-
-
-_PLAIN_NUMBERS = frozenset((float, int))
-
-
-def _vector(value: Any, path: str, size: int | None = None, min_size: int = 0, allow_inf: bool = False) -> list[float]:
-    """A list of numbers, of exactly ``size`` entries or at least ``min_size``."""
-    if not isinstance(value, (list, tuple)) or (size is not None and len(value) != size) or len(value) < min_size:
-        wanted = f"{size} numbers" if size is not None else f"at least {min_size} numbers" if min_size else "numbers"
-        raise _fail(path, f"expected a list of {wanted} (got {quote(value)})")
-    if _PLAIN_NUMBERS.issuperset(map(type, value)):
-        try:
-            # The common case, without naming each entry's path: a finite float sum has no NaN, no
-            # inf and no integer beyond a float (an overflowing one takes the checked path).
-            if math.isfinite(sum(map(float, value))):
-                return [float(v) for v in value]
-        except OverflowError:
-            pass
-    return [_number(v, f"{path}[{i}]", allow_inf=allow_inf) for i, v in enumerate(value)]
-
-
-def _bounds(low: list[float], high: list[float], path: str) -> None:
-    """Random draws need finite bounds with low <= high in every component."""
-    for i, (a, b) in enumerate(zip(low, high)):
-        if not (math.isfinite(a) and math.isfinite(b)) or a > b:
-            raise _fail(path, f"component {i}: expected finite bounds with low <= high (got {a:g}, {b:g})")
-
-
-def _points(value: Any, path: str, min_count: int) -> np.ndarray:
-    """A list of at least ``min_count`` [x, y] points, as an (N, 2) array."""
-    if not isinstance(value, (list, tuple)) or len(value) < min_count:
-        raise _fail(path, f"expected a list of at least {min_count} [x, y] points (got {quote(value)})")
-    return np.array([_vector(p, f"{path}[{i}]", size=2) for i, p in enumerate(value)], dtype=float)
-
-
-def _mapping(value: Any, path: str) -> dict:
-    if not isinstance(value, dict):
-        raise _fail(path, f"expected a mapping (got {quote(value)})")
-    return value
-
-
-def _check_keys(mapping: dict, allowed: tuple[str, ...], path: str) -> None:
-    for key in mapping:
-        if key not in allowed:
-            raise _fail(_join(path, str(key)), f"unknown key; allowed: {', '.join(allowed)}")
-
-
-def _fit3(values: list[float]) -> tuple[float, float, float]:
-    """IR-SIM's state fitting: zero-padded or truncated to x, y, theta."""
-    if len(values) >= 3:
-        return values[0], values[1], values[2]
-    x, y, theta = (list(values) + [0.0, 0.0, 0.0])[:3]
-    return x, y, theta
-
-
-def _build(model: type[BaseModel], path: str, fields: dict[str, _Value]) -> Any:
-    """Validate a model; a pydantic error names the IR-SIM field it came from."""
-    try:
-        return model(**{name: item.value for name, item in fields.items()})
-    except ValidationError as exc:
-        error = pydantic_error(None, exc)
-        field = fields[error.field].path if error.field in fields else path
-        raise _fail(field, error.problem) from None
 
 
 # -- world ---------------------------------------------------------------------------------------
@@ -290,28 +188,29 @@ def _build(model: type[BaseModel], path: str, fields: dict[str, _Value]) -> Any:
 
 def _world(value: Any, path: str) -> tuple[WorldSpec, str | None]:
     """The world block as a WorldSpec (no walls, Euler steps) and its name, if given."""
-    world = _mapping({} if value is None else value, path)
-    _check_keys(world, WORLD_KEYS, path)
-    at = lambda key: _join(path, key)  # noqa: E731
+    world = mapping_of({} if value is None else value, path)
+    check_keys(world, WORLD_KEYS, path)
+    at = lambda key: join(path, key)  # noqa: E731
     fields = {
-        "width": _Value(_number(world.get("width", 10), at("width"), 0, strict=True), at("width")),
-        "height": _Value(_number(world.get("height", 10), at("height"), 0, strict=True), at("height")),
-        "offset": _Value(tuple(_vector(world.get("offset", [0, 0]), at("offset"), size=2)), at("offset")),
-        "step_time": _Value(_number(world.get("step_time", 0.1), at("step_time"), 0, strict=True), at("step_time")),
-        "walls": _Value(False, path),  # IR-SIM's world rectangle only frames the plot
-        "integrator": _Value("euler", path),
+        "width": Value(real(world.get("width", 10), at("width"), 0, strict=True), at("width")),
+        "height": Value(real(world.get("height", 10), at("height"), 0, strict=True), at("height")),
+        "offset": Value(tuple(number_list(world.get("offset", [0, 0]), at("offset"), size=2)), at("offset")),
+        "step_time": Value(real(world.get("step_time", 0.1), at("step_time"), 0, strict=True), at("step_time")),
+        "walls": Value(False, path),  # IR-SIM's world rectangle only frames the plot
+        "integrator": Value("euler", path),
     }
     if world.get("sample_time") is not None:
-        _number(world["sample_time"], at("sample_time"), 0, strict=True)
-    _text(world.get("collision_mode", "stop"), at("collision_mode"), ("stop",))
-    _text(world.get("step_mode", "internal"), at("step_mode"), ("internal", "external"))
-    _text(world.get("control_mode", "auto"), at("control_mode"), ("auto", "keyboard"))
+        real(world["sample_time"], at("sample_time"), 0, strict=True)
+    fields["collision_mode"] = Value(string(world.get("collision_mode", "stop"), at("collision_mode"), COLLISION_MODES),
+                                     at("collision_mode"))
+    string(world.get("step_mode", "internal"), at("step_mode"), ("internal", "external"))
+    string(world.get("control_mode", "auto"), at("control_mode"), ("auto", "keyboard"))
     if world.get("obstacle_map") is not None:
-        raise _fail(at("obstacle_map"), "obstacle maps are not supported; allowed: null (use obstacle shapes)")
+        raise fail(at("obstacle_map"), "obstacle maps are not supported; allowed: null (use obstacle shapes)")
     name = world.get("name")
     if name is not None:
-        _text(name, at("name"))
-    return _build(WorldSpec, path, fields), name
+        string(name, at("name"))
+    return build_model(WorldSpec, path, fields), name
 
 
 # -- objects: fan-out and placement --------------------------------------------------------------
@@ -324,26 +223,26 @@ def _groups(value: Any, path: str) -> list[tuple[dict, str]]:
     if isinstance(value, dict):
         return [(value, path)]
     if not isinstance(value, list):
-        raise _fail(path, f"expected a mapping or a list of mappings (got {quote(value)})")
-    return [(_mapping(group, f"{path}[{i}]"), f"{path}[{i}]") for i, group in enumerate(value)]
+        raise fail(path, f"expected a mapping or a list of mappings (got {quote(value)})")
+    return [(mapping_of(group, f"{path}[{i}]"), f"{path}[{i}]") for i, group in enumerate(value)]
 
 
-def _fan_out(value: Any, number: int, path: str) -> list[_Value]:
+def _fan_out(value: Any, number: int, path: str) -> list[Value]:
     """IR-SIM's per-object spread: a scalar, mapping or number list is shared; any other list holds
     one entry per object, padded with its last entry or truncated."""
     if number == 0:
         return []
     # A list holding any number is a (possibly malformed) vector, so validation names its bad entry.
     if not isinstance(value, list) or not value or any(isinstance(v, numbers.Real) for v in value):
-        return [_Value(value, path)] * number
-    items = [_Value(v, f"{path}[{i}]") for i, v in enumerate(value[:number])]
+        return [Value(value, path)] * number
+    items = [Value(v, f"{path}[{i}]") for i, v in enumerate(value[:number])]
     return items + [items[-1]] * (number - len(items))
 
 
-def _sensor_fan_out(value: Any, number: int, path: str) -> list[_Value]:
+def _sensor_fan_out(value: Any, number: int, path: str) -> list[Value]:
     """Sensors are shared when given as a list of mappings, else one list per object."""
     if not isinstance(value, list) or all(isinstance(v, dict) for v in value):
-        return [_Value(value, path)] * number
+        return [Value(value, path)] * number
     return _fan_out(value, number, path)
 
 
@@ -402,76 +301,63 @@ def _spaced_points(rng, low: np.ndarray, high: np.ndarray, number: int, min_dist
 
 
 def _placements(group: dict, number: int, path: str, draws: _Draws,
-                world: WorldSpec) -> tuple[list[_Value], list[_Value]]:
+                world: WorldSpec) -> tuple[list[Value], list[Value]]:
     """States and goals of a group's objects, by its ``distribution``."""
-    dist_path = _join(path, "distribution")
-    distribution = _mapping(group.get("distribution") or {"name": "manual"}, dist_path)
-    _check_keys(distribution, DISTRIBUTION_KEYS, dist_path)
+    dist_path = join(path, "distribution")
+    distribution = mapping_of(group.get("distribution") or {"name": "manual"}, dist_path)
+    check_keys(distribution, DISTRIBUTION_KEYS, dist_path)
     if "name" not in distribution:
-        raise _fail(_join(dist_path, "name"), "missing; allowed: manual, random, circle")
-    name = _text(distribution["name"], _join(dist_path, "name"), ("manual", "random", "circle"))
+        raise fail(join(dist_path, "name"), "missing; allowed: manual, random, circle")
+    name = string(distribution["name"], join(dist_path, "name"), ("manual", "random", "circle"))
     if distribution.get("3d"):
-        raise _fail(_join(dist_path, "3d"), "3D placement is not supported (IR-SIM neither); allowed: false")
+        raise fail(join(dist_path, "3d"), "3D placement is not supported (IR-SIM neither); allowed: false")
     (x0, y0), width, height = world.offset, world.width, world.height
-    at = lambda key: _join(dist_path, key)  # noqa: E731
+    at = lambda key: join(dist_path, key)  # noqa: E731
     if name == "manual":
         state = group.get("state")
         goal = group.get("goal")
-        return (_fan_out([1, 1, 0] if state is None else state, number, _join(path, "state")),
-                _fan_out([1, 9, 0] if goal is None else goal, number, _join(path, "goal")))
+        return (_fan_out([1, 1, 0] if state is None else state, number, join(path, "state")),
+                _fan_out([1, 9, 0] if goal is None else goal, number, join(path, "goal")))
     if name == "random":
         default_low = [x0 + _MARGIN, y0 + _MARGIN, -math.pi]
         default_high = [x0 + width - _MARGIN, y0 + height - _MARGIN, math.pi]
-        low = _vector(distribution.get("range_low", default_low), at("range_low"), min_size=3)
-        high = _vector(distribution.get("range_high", default_high), at("range_high"), min_size=3)
-        _bounds(low[:3], high[:3], at("range_high"))
-        spacing = _number(distribution.get("min_distance", 1.0), at("min_distance"))
+        low = number_list(distribution.get("range_low", default_low), at("range_low"), min_size=3)
+        high = number_list(distribution.get("range_high", default_high), at("range_high"), min_size=3)
+        ordered_bounds(low[:3], high[:3], at("range_high"))
+        spacing = real(distribution.get("min_distance", 1.0), at("min_distance"))
         states, goals = _random_points(draws, low, high, number, spacing, at("min_distance"))
-        return [_Value(s, dist_path) for s in states], [_Value(g, dist_path) for g in goals]
-    radius = _number(distribution.get("radius", min(width, height) / 2 - _MARGIN), at("radius"))
-    cx, cy = _vector(distribution.get("center", [x0 + width / 2, y0 + height / 2]), at("center"), min_size=2)[:2]
+        return [Value(s, dist_path) for s in states], [Value(g, dist_path) for g in goals]
+    radius = real(distribution.get("radius", min(width, height) / 2 - _MARGIN), at("radius"))
+    cx, cy = number_list(distribution.get("center", [x0 + width / 2, y0 + height / 2]), at("center"), min_size=2)[:2]
     states, goals = [], []
     for i in range(number):
         # Evenly spaced on the circle, facing the centre, each goal diametrically opposite.
         theta = 2 * math.pi * i / number
         dx, dy = radius * math.cos(theta), radius * math.sin(theta)
-        states.append(_Value([cx + dx, cy + dy, theta - math.pi], dist_path))
-        goals.append(_Value([cx - dx, cy - dy, theta - math.pi], dist_path))
+        states.append(Value([cx + dx, cy + dy, theta - math.pi], dist_path))
+        goals.append(Value([cx - dx, cy - dy, theta - math.pi], dist_path))
     return states, goals
 
 
 def _expand(group: dict, path: str, draws: _Draws, world: WorldSpec) -> list[Entry]:
     """One entry per object of a group, every key resolved to that object's value."""
-    _check_keys(group, OBJECT_KEYS, path)
-    number = _integer(group.get("number", 1), _join(path, "number"), 0, MAX_OBJECTS)
-    draws.spend("objects", number, _join(path, "number"), "fewer objects")
+    check_keys(group, OBJECT_KEYS, path)
+    number = whole(group.get("number", 1), join(path, "number"), 0, MAX_OBJECTS)
+    draws.spend("objects", number, join(path, "number"), "fewer objects")
     states, goals = _placements(group, number, path, draws, world)
     entries: list[Entry] = [{"state": states[i], "goal": goals[i]} for i in range(number)]
     for key, value in group.items():
         if key in ("number", "distribution", "state", "goal"):
             continue
         spread = _sensor_fan_out if key == "sensors" else _fan_out
-        for entry, item in zip(entries, spread(value, number, _join(path, key))):
+        for entry, item in zip(entries, spread(value, number, join(path, key))):
             entry[key] = item
     return entries
 
 
-def _values(entry: Entry, keys: tuple[str, ...]) -> tuple:
-    """The value objects an entry has for ``keys`` (None where absent), to key :class:`ReadCache` reads."""
-    return tuple([getattr(entry.get(key), "value", None) for key in keys])
-
-
-def _get(entry: Entry, key: str, default: Any, path: str) -> _Value:
-    """An entry's value for ``key``, or ``default`` (also for an explicit null)."""
-    item = entry.get(key)
-    if item is None or item.value is None:
-        return _Value(default, _join(path, key))
-    return item
-
-
 def _state(entry: Entry) -> tuple[float, float, float]:
     state = entry["state"]
-    return _fit3(_vector(state.value, state.path))
+    return fit3(number_list(state.value, state.path))
 
 
 def _goal(entry: Entry) -> tuple[float, float]:
@@ -479,15 +365,15 @@ def _goal(entry: Entry) -> tuple[float, float]:
     value = goal.value
     if isinstance(value, list) and value and isinstance(value[0], list):
         # A list of goals is visited in order; the scenario's goal is the first one.
-        goal = _Value(value[0], f"{goal.path}[0]")
-    x, y = _vector(goal.value, goal.path, min_size=2)[:2]
+        goal = Value(value[0], f"{goal.path}[0]")
+    x, y = number_list(goal.value, goal.path, min_size=2)[:2]
     return x, y
 
 
 # -- shapes ----------------------------------------------------------------------------------------
 
 
-def _shape(item: _Value, draws: _Draws, allowed: tuple[str, ...]) -> _Shape:
+def _shape(item: Value, draws: _Draws, allowed: tuple[str, ...]) -> _Shape:
     """An IR-SIM ``shape`` mapping as a body-frame outline; draws random shapes from the file's generator.
 
     A group's objects share one shape mapping: a fixed shape is read once per :class:`ReadCache`
@@ -497,41 +383,41 @@ def _shape(item: _Value, draws: _Draws, allowed: tuple[str, ...]) -> _Shape:
         return _read_shape(item, draws, allowed)
     shape = draws.reads.once(("shape", allowed), (item.value,), lambda: _read_shape(item, draws, allowed))
     if shape.kind in ("polygon", "linestring"):  # every object's vertices count, shared or not
-        draws.spend("vertices", len(shape.points), _join(item.path, "vertices"), "fewer or simpler polygons")
+        draws.spend("vertices", len(shape.points), join(item.path, "vertices"), "fewer or simpler polygons")
     return shape
 
 
-def _read_shape(item: _Value, draws: _Draws, allowed: tuple[str, ...]) -> _Shape:
+def _read_shape(item: Value, draws: _Draws, allowed: tuple[str, ...]) -> _Shape:
     if item.value is None:
         # IR-SIM's fallback for an object without a shape (it logs a warning).
         return _Shape("circle", np.zeros((1, 2)), radius=1.0)
-    shape = _mapping(item.value, item.path)
-    at = lambda key: _join(item.path, key)  # noqa: E731
-    name = _text(shape.get("name", "circle"), at("name")).lower()
+    shape = mapping_of(item.value, item.path)
+    at = lambda key: join(item.path, key)  # noqa: E731
+    name = string(shape.get("name", "circle"), at("name")).lower()
     if name not in allowed:
-        raise _fail(at("name"), f"unsupported shape {quote(name)}; allowed: {', '.join(allowed)}")
-    _check_keys(shape, SHAPE_KEYS[name], item.path)
+        raise fail(at("name"), f"unsupported shape {quote(name)}; allowed: {', '.join(allowed)}")
+    check_keys(shape, SHAPE_KEYS[name], item.path)
     # An Ackermann wheelbase moves the outline forward by half of it, as in IR-SIM.
-    shift = 0.5 * _number(shape["wheelbase"], at("wheelbase"), 0) if shape.get("wheelbase") is not None else 0.0
-    random_shape = shape.get("random_shape") is not None and _flag(shape["random_shape"], at("random_shape"))
+    shift = 0.5 * real(shape["wheelbase"], at("wheelbase"), 0) if shape.get("wheelbase") is not None else 0.0
+    random_shape = shape.get("random_shape") is not None and boolean(shape["random_shape"], at("random_shape"))
     if name == "circle":
-        center = np.array([_vector(shape.get("center", [0, 0]), at("center"), size=2)]) + [shift, 0.0]
+        center = np.array([number_list(shape.get("center", [0, 0]), at("center"), size=2)]) + [shift, 0.0]
         if random_shape:
-            low, high = _vector(shape.get("radius_range", [0.1, 1.0]), at("radius_range"), size=2)
-            _bounds([low], [high], at("radius_range"))
+            low, high = number_list(shape.get("radius_range", [0.1, 1.0]), at("radius_range"), size=2)
+            ordered_bounds([low], [high], at("radius_range"))
             radius = float(draws.rng.uniform(low, high))
             if radius <= 0:
-                raise _fail(at("radius_range"), f"must give radii > 0 (drew {radius:g})")
+                raise fail(at("radius_range"), f"must give radii > 0 (drew {radius:g})")
         else:
-            radius = _number(shape.get("radius", 0.2), at("radius"), 0, strict=True)
+            radius = real(shape.get("radius", 0.2), at("radius"), 0, strict=True)
         return _Shape("circle", center, radius=radius)
     if name == "rectangle":
-        length = _number(shape.get("length", 1.0), at("length"), 0, strict=True)
-        width = _number(shape.get("width", 1.0), at("width"), 0, strict=True)
+        length = real(shape.get("length", 1.0), at("length"), 0, strict=True)
+        width = real(shape.get("width", 1.0), at("width"), 0, strict=True)
         return _Shape("rectangle", np.array([[shift, 0.0]]), length=length, width=width)
     if "vertices" in shape or name == "linestring":
         # IR-SIM requires a linestring's vertices even when it draws a random one instead.
-        vertices = _points(shape.get("vertices"), at("vertices"), 3 if name == "polygon" else 2)
+        vertices = point_list(shape.get("vertices"), at("vertices"), 3 if name == "polygon" else 2)
     else:
         vertices = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])  # IR-SIM's default square
     if random_shape:
@@ -542,22 +428,22 @@ def _read_shape(item: _Value, draws: _Draws, allowed: tuple[str, ...]) -> _Shape
 def _random_polygon(shape: dict, path: str, draws: _Draws, default_convex: bool) -> np.ndarray:
     """A random star-shaped polygon, drawn in IR-SIM's order: centre, mean radius, irregularity,
     spikiness, vertex count, angle steps, start angle, then one radius per vertex."""
-    at = lambda key: _join(path, key)  # noqa: E731
-    convex = _flag(shape.get("is_convex", default_convex), at("is_convex"))
-    center_range = _vector(shape.get("center_range", [0, 0, 0, 0]), at("center_range"), size=4)
-    radius_range = _vector(shape.get("avg_radius_range", [0.1, 1]), at("avg_radius_range"), size=2)
-    irregularity_range = _vector(shape.get("irregularity_range", [0, 1]), at("irregularity_range"), size=2)
+    at = lambda key: join(path, key)  # noqa: E731
+    convex = boolean(shape.get("is_convex", default_convex), at("is_convex"))
+    center_range = number_list(shape.get("center_range", [0, 0, 0, 0]), at("center_range"), size=4)
+    radius_range = number_list(shape.get("avg_radius_range", [0.1, 1]), at("avg_radius_range"), size=2)
+    irregularity_range = number_list(shape.get("irregularity_range", [0, 1]), at("irregularity_range"), size=2)
     spike_default = [0, 0] if convex else [0, 1]
-    spike_range = _vector(shape.get("spikeyness_range", spike_default), at("spikeyness_range"), size=2)
-    _bounds(center_range[0:2], center_range[2:], at("center_range"))
-    _bounds(radius_range[:1], radius_range[1:], at("avg_radius_range"))
-    _bounds(irregularity_range[:1], irregularity_range[1:], at("irregularity_range"))
-    _bounds(spike_range[:1], spike_range[1:], at("spikeyness_range"))
+    spike_range = number_list(shape.get("spikeyness_range", spike_default), at("spikeyness_range"), size=2)
+    ordered_bounds(center_range[0:2], center_range[2:], at("center_range"))
+    ordered_bounds(radius_range[:1], radius_range[1:], at("avg_radius_range"))
+    ordered_bounds(irregularity_range[:1], irregularity_range[1:], at("irregularity_range"))
+    ordered_bounds(spike_range[:1], spike_range[1:], at("spikeyness_range"))
     count_range = shape.get("num_vertices_range", [4, 10])
     if not isinstance(count_range, list) or len(count_range) != 2:
-        raise _fail(at("num_vertices_range"), f"expected a list of 2 integers (got {quote(count_range)})")
-    low_count = _integer(count_range[0], at("num_vertices_range") + "[0]", 3, MAX_VERTICES - 1)
-    high_count = _integer(count_range[1], at("num_vertices_range") + "[1]", low_count + 1, MAX_VERTICES)
+        raise fail(at("num_vertices_range"), f"expected a list of 2 integers (got {quote(count_range)})")
+    low_count = whole(count_range[0], at("num_vertices_range") + "[0]", 3, MAX_VERTICES - 1)
+    high_count = whole(count_range[1], at("num_vertices_range") + "[1]", low_count + 1, MAX_VERTICES)
     rng = draws.rng
     center = rng.uniform(low=center_range[0:2], high=center_range[2:], size=(1, 2))[0]
     avg_radius = float(rng.uniform(low=radius_range[0], high=radius_range[1], size=(1,))[0])
@@ -566,7 +452,7 @@ def _random_polygon(shape: dict, path: str, draws: _Draws, default_convex: bool)
     count = int(rng.integers(low=low_count, high=high_count, size=(1,))[0])
     draws.spend("vertices", count, at("num_vertices_range"), "fewer or simpler polygons")
     if not (0 <= irregularity <= 1 and 0 <= spikiness <= 1) or avg_radius <= 0:
-        raise _fail(path, "random polygon ranges must give irregularity and spikeyness in [0, 1] and radii > 0")
+        raise fail(path, "random polygon ranges must give irregularity and spikeyness in [0, 1] and radii > 0")
     spread = irregularity * 2 * math.pi / count
     steps = [float(rng.uniform(2 * math.pi / count - spread, 2 * math.pi / count + spread)) for _ in range(count)]
     scale = sum(steps) / (2 * math.pi)
@@ -595,7 +481,7 @@ def _polygon_ring(vertices: np.ndarray, path: str) -> np.ndarray:
         return vertices
     (x0, y0), (x1, y1) = vertices.min(axis=0), vertices.max(axis=0)
     if x1 - x0 <= 0 or y1 - y0 <= 0:
-        raise _fail(path, "the polygon has no area; allowed: at least 3 vertices not on one line")
+        raise fail(path, "the polygon has no area; allowed: at least 3 vertices not on one line")
     return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
 
 
@@ -609,16 +495,18 @@ def _transform_point(point: np.ndarray, state: tuple[float, float, float]) -> tu
     return px * c - py * s + x, px * s + py * c + y
 
 
-def _obstacle(shape: _Shape, state: tuple[float, float, float], unobstructed: bool, shape_path: str) -> Any:
-    """A shape placed at a state as a project obstacle."""
+def _obstacle(shape: _Shape, state: tuple[float, float, float], unobstructed: bool, shape_path: str,
+              motion: Motion | None = None) -> Any:
+    """A shape placed at a state as a project obstacle (circles and rectangles may move)."""
     if shape.kind == "circle":
         x, y = _transform_point(shape.points[0], state)
-        return CircleObstacle(x=x, y=y, radius=shape.radius, unobstructed=unobstructed)
+        return CircleObstacle(x=x, y=y, radius=shape.radius, yaw=state[2], unobstructed=unobstructed, motion=motion)
     if shape.kind == "rectangle":
         x, y = _transform_point(shape.points[0], state)
-        return BoxObstacle(x=x, y=y, length=shape.length, width=shape.width, yaw=state[2], unobstructed=unobstructed)
+        return BoxObstacle(x=x, y=y, length=shape.length, width=shape.width, yaw=state[2], unobstructed=unobstructed,
+                           motion=motion)
     if shape.kind == "polygon":
-        ring = _polygon_ring(shape.points, _join(shape_path, "vertices"))
+        ring = _polygon_ring(shape.points, join(shape_path, "vertices"))
         return PolygonObstacle(vertices=[tuple(p) for p in _transform(ring, state)], unobstructed=unobstructed)
     return SegmentObstacle(points=[tuple(p) for p in _transform(shape.points, state)], unobstructed=unobstructed)
 
@@ -628,182 +516,203 @@ def _obstacle(shape: _Shape, state: tuple[float, float, float], unobstructed: bo
 
 def _kinematics_name(entry: Entry, path: str) -> str | None:
     """The validated kinematics name of an object (None: passive, i.e. static)."""
-    item = _get(entry, "kinematics", None, path)
+    item = value_of(entry, "kinematics", None, path)
     if item.value is None:
         return None
-    kinematics = _mapping(item.value, item.path)
-    _check_keys(kinematics, KINEMATICS_KEYS, item.path)
+    kinematics = mapping_of(item.value, item.path)
+    check_keys(kinematics, KINEMATICS_KEYS, item.path)
     if "name" not in kinematics:
         return None
-    name_path = _join(item.path, "name")
-    return _text(_text(kinematics["name"], name_path).lower(), name_path, KINEMATICS_NAMES)
+    name_path = join(item.path, "name")
+    return string(string(kinematics["name"], name_path).lower(), name_path, KINEMATICS_NAMES)
 
 
 def _check_diff_drive(entry: Entry, path: str) -> None:
     """The controlled robot must be an IR-SIM diff drive that can move and has no motion noise."""
-    item = _get(entry, "kinematics", None, path)
+    item = value_of(entry, "kinematics", None, path)
     allowed = "allowed: {name: diff}"
     if item.value is None:
-        raise _fail(item.path, f"missing (IR-SIM would make the robot static); {allowed}")
-    kinematics = _mapping(item.value, item.path)
+        raise fail(item.path, f"missing (IR-SIM would make the robot static); {allowed}")
+    kinematics = mapping_of(item.value, item.path)
     name = kinematics.get("name")
     if not isinstance(name, str) or name.lower() != "diff":
-        raise _fail(item.path, f"unsupported kinematics {quote(name)} for the controlled robot; {allowed}")
-    _check_keys(kinematics, DIFF_KINEMATICS_KEYS, item.path)
-    if _flag(kinematics.get("noise", False), _join(item.path, "noise")):
-        raise _fail(_join(item.path, "noise"), "motion noise is not modelled; allowed: false")
-    if _flag(_get(entry, "static", False, path).value, _join(path, "static")):
-        raise _fail(_join(path, "static"), "a static robot cannot be driven; allowed: false")
-    velocity = _get(entry, "velocity", [0, 0], path)
-    if any(v != 0 for v in _vector(velocity.value, velocity.path, size=2)):
-        raise _fail(velocity.path, "the robot starts at rest; allowed: [0, 0]")
+        raise fail(item.path, f"unsupported kinematics {quote(name)} for the controlled robot; {allowed}")
+    check_keys(kinematics, DIFF_KINEMATICS_KEYS, item.path)
+    if boolean(kinematics.get("noise", False), join(item.path, "noise")):
+        raise fail(join(item.path, "noise"), "motion noise is not modelled; allowed: false")
+    if boolean(value_of(entry, "static", False, path).value, join(path, "static")):
+        raise fail(join(path, "static"), "a static robot cannot be driven; allowed: false")
+    velocity = value_of(entry, "velocity", [0, 0], path)
+    if any(v != 0 for v in number_list(velocity.value, velocity.path, size=2)):
+        raise fail(velocity.path, "the robot starts at rest; allowed: [0, 0]")
 
 
 def _robot_profile(entry: Entry, shape: _Shape, path: str) -> RobotProfile:
     """Footprint, velocity limits and acceleration limits of the controlled robot."""
     if shape.kind == "circle" and np.any(shape.points != 0):
-        raise _fail(_join(path, "shape.center"), "an off-centre footprint is not supported; allowed: [0, 0]")
+        raise fail(join(path, "shape.center"), "an off-centre footprint is not supported; allowed: [0, 0]")
     if shape.kind == "rectangle" and np.any(shape.points != 0):
-        raise _fail(_join(path, "shape.wheelbase"), "an off-centre footprint is not supported; allowed: null")
-    vel_min = _get(entry, "vel_min", [-1, -1], path)
-    vel_max = _get(entry, "vel_max", [1, 1], path)
-    acce = _get(entry, "acce", [math.inf, math.inf], path)
-    v_min, w_min = _vector(vel_min.value, vel_min.path, size=2, allow_inf=True)
-    v_max, w_max = _vector(vel_max.value, vel_max.path, size=2, allow_inf=True)
-    accel_v, accel_w = _vector(acce.value, acce.path, size=2, allow_inf=True)
+        raise fail(join(path, "shape.wheelbase"), "an off-centre footprint is not supported; allowed: null")
+    vel_min = value_of(entry, "vel_min", [-1, -1], path)
+    vel_max = value_of(entry, "vel_max", [1, 1], path)
+    acce = value_of(entry, "acce", [math.inf, math.inf], path)
+    v_min, w_min = number_list(vel_min.value, vel_min.path, size=2, allow_inf=True)
+    v_max, w_max = number_list(vel_max.value, vel_max.path, size=2, allow_inf=True)
+    accel_v, accel_w = number_list(acce.value, acce.path, size=2, allow_inf=True)
     for low, high, what in ((v_min, v_max, "linear"), (w_min, w_max, "angular")):
         if low > high:
-            raise _fail(vel_min.path, f"{what} minimum {low:g} exceeds vel_max's {high:g}; allowed: at most vel_max")
-    shape_path = _get(entry, "shape", None, path).path
+            raise fail(vel_min.path, f"{what} minimum {low:g} exceeds vel_max's {high:g}; allowed: at most vel_max")
+    shape_path = value_of(entry, "shape", None, path).path
     fields = {
-        "v_min": _Value(v_min, vel_min.path), "w_min": _Value(w_min, vel_min.path),
-        "v_max": _Value(v_max, vel_max.path), "w_max": _Value(w_max, vel_max.path),
-        "accel_v": _Value(accel_v, acce.path), "accel_w": _Value(accel_w, acce.path),
+        "v_min": Value(v_min, vel_min.path), "w_min": Value(w_min, vel_min.path),
+        "v_max": Value(v_max, vel_max.path), "w_max": Value(w_max, vel_max.path),
+        "accel_v": Value(accel_v, acce.path), "accel_w": Value(accel_w, acce.path),
     }
     if shape.kind == "circle":
-        fields.update(shape=_Value("circle", shape_path), radius=_Value(shape.radius, shape_path))
+        fields.update(shape=Value("circle", shape_path), radius=Value(shape.radius, shape_path))
     else:
-        fields.update(shape=_Value("box", shape_path), length=_Value(shape.length, shape_path),
-                      width=_Value(shape.width, shape_path))
-    return _build(RobotProfile, path, fields)
+        fields.update(shape=Value("box", shape_path), length=Value(shape.length, shape_path),
+                      width=Value(shape.width, shape_path))
+    return build_model(RobotProfile, path, fields)
 
 
 def _lidar(entry: Entry, path: str) -> LidarSpec:
     """The first lidar2d sensor as a LidarSpec (IR-SIM's lidar2d defaults when there is none)."""
-    item = _get(entry, "sensors", [], path)
+    item = value_of(entry, "sensors", [], path)
     if not isinstance(item.value, list):
-        raise _fail(item.path, f"expected a list of sensor mappings (got {quote(item.value)})")
+        raise fail(item.path, f"expected a list of sensor mappings (got {quote(item.value)})")
     sensor, sensor_path = {}, item.path
     for i, candidate in enumerate(item.value):
         candidate_path = f"{item.path}[{i}]"
-        _mapping(candidate, candidate_path)
+        mapping_of(candidate, candidate_path)
         key = "name" if "name" in candidate else "type"
-        kind = _text(candidate.get(key, "lidar2d"), _join(candidate_path, key), SENSOR_TYPES)
+        kind = string(candidate.get(key, "lidar2d"), join(candidate_path, key), SENSOR_TYPES)
         if kind == "lidar2d":
             sensor, sensor_path = candidate, candidate_path
             break
-    _check_keys(sensor, LIDAR_KEYS, sensor_path)
-    at = lambda key: _join(sensor_path, key)  # noqa: E731
-    number = _integer(sensor.get("number", 100), at("number"), 1, MAX_BEAMS)
-    angle_range = min(_number(sensor.get("angle_range", math.pi), at("angle_range"), 0, strict=True), 2 * math.pi)
-    offset = _fit3(_vector(sensor.get("offset", [0, 0, 0]), at("offset"), min_size=2))
-    noisy = _flag(sensor.get("noise", False), at("noise"))
-    std = _number(sensor.get("std", 0.2), at("std"), 0)
+    check_keys(sensor, LIDAR_KEYS, sensor_path)
+    at = lambda key: join(sensor_path, key)  # noqa: E731
+    number = whole(sensor.get("number", 100), at("number"), 1, MAX_BEAMS)
+    angle_range = min(real(sensor.get("angle_range", math.pi), at("angle_range"), 0, strict=True), 2 * math.pi)
+    offset = fit3(number_list(sensor.get("offset", [0, 0, 0]), at("offset"), min_size=2))
+    noisy = boolean(sensor.get("noise", False), at("noise"))
+    std = real(sensor.get("std", 0.2), at("std"), 0)
     fields = {
-        "beams": _Value(number, at("number")),
-        "range_min": _Value(_number(sensor.get("range_min", 0), at("range_min"), 0), at("range_min")),
-        "range_max": _Value(_number(sensor.get("range_max", 10), at("range_max"), 0, strict=True), at("range_max")),
-        "angle_range": _Value(angle_range, at("angle_range")),
-        "offset": _Value(offset, at("offset")),
-        "noise_std": _Value(std if noisy else 0.0, at("std")),
-        "repeat_end_beam": _Value(True, sensor_path),  # IR-SIM's linspace layout, for parity
+        "beams": Value(number, at("number")),
+        "range_min": Value(real(sensor.get("range_min", 0), at("range_min"), 0), at("range_min")),
+        "range_max": Value(real(sensor.get("range_max", 10), at("range_max"), 0, strict=True), at("range_max")),
+        "angle_range": Value(angle_range, at("angle_range")),
+        "offset": Value(offset, at("offset")),
+        "noise_std": Value(std if noisy else 0.0, at("std")),
+        "repeat_end_beam": Value(True, sensor_path),  # IR-SIM's linspace layout, for parity
     }
-    return _build(LidarSpec, sensor_path, fields)
+    return build_model(LidarSpec, sensor_path, fields)
 
 
-def _static_obstacle(entry: Entry, path: str, draws: _Draws, allowed: tuple[str, ...]) -> Any:
-    """Any object other than the controlled robot: a static obstacle at its initial state."""
+def _object(entry: Entry, path: str, draws: _Draws, role: str) -> Any:
+    """Any object other than the controlled robot: an obstacle at its initial state, moving as
+    IR-SIM moves it if it has kinematics and a behaviour."""
     if "kinematics" in entry:  # most obstacles have none, which needs no reading
-        draws.reads.once("kinematics", _values(entry, ("kinematics",)), lambda: _kinematics_name(entry, path))
-    item = _get(entry, "shape", None, path)
-    shape = _shape(item, draws, allowed)
+        draws.reads.once("kinematics", values_of(entry, ("kinematics",)), lambda: _kinematics_name(entry, path))
+    item = value_of(entry, "shape", None, path)
+    shape = _shape(item, draws, OBSTACLE_SHAPES)
     flag = entry.get("unobstructed")
-    unobstructed = flag is not None and flag.value is not None and _flag(flag.value, flag.path)
+    unobstructed = flag is not None and flag.value is not None and boolean(flag.value, flag.path)
+    state = _state(entry)
+    motion = None
+    if moves(entry, path):
+        if shape.kind not in ("circle", "rectangle"):
+            raise fail(join(item.path, "name"), f"a moving {shape.kind} is not supported; allowed: circle, rectangle")
+        if np.any(shape.points != 0):
+            raise fail(item.path, "a moving shape off its centre is not supported; allowed: a centred circle or rectangle")
+        motion = read_motion(entry, path, draws.rng, path, role)
     try:
-        return _obstacle(shape, _state(entry), unobstructed, item.path)
+        return _obstacle(shape, state, unobstructed, item.path, motion)
     except ValidationError as exc:
-        raise _fail(item.path, pydantic_error(None, exc).problem) from None
+        raise fail(item.path, pydantic_error(None, exc).problem) from None
 
 
 _DIFF_DRIVE_KEYS = ("kinematics", "static", "velocity")
 _PROFILE_KEYS = ("vel_min", "vel_max", "acce")  # and the footprint read, which is keyed on its shape
 
 
-def _parse(data: dict, source: str | Path | None, seed: int | None, reads: ReadCache) -> Scenario:
+def _parse(data: dict, source: str | Path | None, draws: _Draws) -> Scenario:
     prefix = ""
     if "irsim" in data:
         # IR-SIM reads only the ``irsim`` block of a file shared with another simulator.
-        data, prefix = _mapping(data["irsim"], "irsim"), "irsim."
+        data, prefix = mapping_of(data["irsim"], "irsim"), "irsim."
     for key in data:
         if key not in TOP_KEYS:
-            raise _fail(f"{prefix}{key}", f"unknown key; allowed: {', '.join(TOP_KEYS)}")
-    draws = _Draws(seed, reads)
+            raise fail(f"{prefix}{key}", f"unknown key; allowed: {', '.join(TOP_KEYS)}")
+    reads = draws.reads
     world, name = reads.once("world", (data.get("world"),), lambda: _world(data.get("world"), f"{prefix}world"))
     obstacles: list[Any] = []
-    robot = None
+    robot = robot_motion = None
     for group, path in _groups(data.get("robot"), f"{prefix}robot"):
         for entry in _expand(group, path, draws, world):
-            # Shapes are read in creation order, so random radii draw from rng as IR-SIM does.
+            # Objects are made in IR-SIM's order, so random radii and wandering goals draw as IR-SIM's do.
             if robot is None:
-                reads.once("diff drive", _values(entry, _DIFF_DRIVE_KEYS), lambda: _check_diff_drive(entry, path))
-                shape = _shape(_get(entry, "shape", None, path), draws, ROBOT_SHAPES)
+                reads.once("diff drive", values_of(entry, _DIFF_DRIVE_KEYS), lambda: _check_diff_drive(entry, path))
+                shape = _shape(value_of(entry, "shape", None, path), draws, ROBOT_SHAPES)
                 robot = (entry, path, shape)
+                if needs_tracking(entry, path):
+                    robot_motion = read_motion(entry, path, draws.rng, path, "robot")
             else:
-                obstacles.append(_static_obstacle(entry, path, draws, OBSTACLE_SHAPES))
+                obstacles.append(_object(entry, path, draws, "robot"))
     if robot is None:
-        raise _fail(f"{prefix}robot", "no robot defined; allowed: at least one robot with kinematics {name: diff}")
+        raise fail(f"{prefix}robot", "no robot defined; allowed: at least one robot with kinematics {name: diff}")
     for group, path in _groups(data.get("obstacle"), f"{prefix}obstacle"):
         for entry in _expand(group, path, draws, world):
-            obstacles.append(_static_obstacle(entry, path, draws, OBSTACLE_SHAPES))
+            obstacles.append(_object(entry, path, draws, "obstacle"))
     entry, path, shape = robot
-    threshold = _get(entry, "goal_threshold", 0.1, path)
+    threshold = value_of(entry, "goal_threshold", 0.1, path)
     fields = {
-        "name": _Value(name or (Path(source).stem if source is not None else "irsim"), f"{prefix}world.name"),
-        "world": _Value(world, f"{prefix}world"),
-        "robot": _Value(reads.once("robot", (*_values(entry, _PROFILE_KEYS), shape),
-                                   lambda: _robot_profile(entry, shape, path)), path),
-        "lidar": _Value(reads.once("lidar", _values(entry, ("sensors",)), lambda: _lidar(entry, path)),
-                        _join(path, "sensors")),
-        "start": _Value(_state(entry), _join(path, "state")),
-        "goal": _Value(_goal(entry), _join(path, "goal")),
-        "goal_threshold": _Value(_number(threshold.value, threshold.path, 0, strict=True), threshold.path),
-        "obstacles": _Value(obstacles, f"{prefix}obstacle"),
-        "kind": _Value("irsim", prefix or "world"),
-        "seed": _Value(seed if reads.once("random", (data,), lambda: has_random_placement(data)) else None,
-                       prefix or "world"),
+        "name": Value(name or (Path(source).stem if source is not None else "irsim"), f"{prefix}world.name"),
+        "world": Value(world, f"{prefix}world"),
+        "robot": Value(reads.once("robot", (*values_of(entry, _PROFILE_KEYS), shape),
+                                  lambda: _robot_profile(entry, shape, path)), path),
+        "lidar": Value(reads.once("lidar", values_of(entry, ("sensors",)), lambda: _lidar(entry, path)),
+                       join(path, "sensors")),
+        "start": Value(_state(entry), join(path, "state")),
+        "goal": Value(_goal(entry), join(path, "goal")),
+        "goal_threshold": Value(real(threshold.value, threshold.path, 0, strict=True), threshold.path),
+        "obstacles": Value(obstacles, f"{prefix}obstacle"),
+        "kind": Value("irsim", prefix or "world"),
+        "seed": Value(draws.seed if reads.once("random", (data,), lambda: has_random_placement(data)) else None,
+                      prefix or "world"),
+        "robot_motion": Value(robot_motion, path),
     }
-    return _build(Scenario, prefix.rstrip("."), fields)
+    return build_model(Scenario, prefix.rstrip("."), fields)
 
 
 def parse_irsim(data: dict, source: str | Path | None = None, seed: int | None = 0,
                 reads: ReadCache | None = None) -> Scenario:
     """A validated :class:`Scenario` from a parsed IR-SIM world YAML mapping.
 
-    ``seed`` drives random placements and shapes. The start may touch an obstacle (IR-SIM allows
-    it), so only types and values are checked, not geometry. Every problem is a one-line
-    :class:`ConfigError` naming the field, e.g. ``obstacle[2].shape.radius: must be > 0 (got -1)``.
-    ``reads``: a :class:`ReadCache` kept between parses of the same, unchanged ``data``.
+    ``seed`` drives random placements, shapes and wandering goals. The start may touch an obstacle
+    (IR-SIM allows it), so only types and values are checked, not geometry. Every problem is a
+    one-line :class:`ConfigError` naming the field, e.g. ``obstacle[2].shape.radius: must be > 0
+    (got -1)``. ``reads``: a :class:`ReadCache` kept between parses of the same, unchanged ``data``.
     """
+    return parse_irsim_drawing(data, source, seed, reads)[0]
+
+
+def parse_irsim_drawing(data: dict, source: str | Path | None = None, seed: int | None = 0,
+                        reads: ReadCache | None = None) -> tuple[Scenario, np.random.Generator]:
+    """:func:`parse_irsim`, and the file's generator where the parse left it: what IR-SIM draws
+    from next (a wanderer's next goal), as ``irsim.make(path, seed=seed)`` leaves it."""
     try:
         if not isinstance(data, dict):
-            raise _fail(None, f"expected a YAML mapping at the top level (got {type(data).__name__})")
-        return _parse(data, source, seed, ReadCache() if reads is None else reads)
+            raise fail(None, f"expected a YAML mapping at the top level (got {type(data).__name__})")
+        draws = _Draws(seed, ReadCache() if reads is None else reads)
+        return _parse(data, source, draws), draws.rng
     except ConfigError as exc:
         raise (exc.with_source(source) if source is not None else exc) from None
 
 
 def has_random_placement(data: dict) -> bool:
-    """Whether any robot or obstacle uses ``distribution: random`` or a ``random_shape``."""
+    """Whether any robot or obstacle uses ``distribution: random``, a ``random_shape`` or a
+    wandering behaviour (whose first goal is drawn with the layout)."""
     if isinstance(data, dict) and isinstance(data.get("irsim"), dict):
         data = data["irsim"]
     if not isinstance(data, dict):
@@ -819,5 +728,9 @@ def has_random_placement(data: dict) -> bool:
             shapes = group.get("shape")
             shapes = shapes if isinstance(shapes, list) else [shapes]
             if any(isinstance(shape, dict) and shape.get("random_shape") for shape in shapes):
+                return True
+            behaviors = [group.get("behavior"), group.get("group_behavior")]
+            behaviors = [b for item in behaviors for b in (item if isinstance(item, list) else [item])]
+            if any(isinstance(b, dict) and b.get("wander") for b in behaviors):
                 return True
     return False

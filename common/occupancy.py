@@ -73,11 +73,11 @@ def bounded_resolution(width: float, height: float, resolution: float) -> float:
 
 def scenario_grid(scenario: Scenario, resolution: float = 0.2, inflation: float | None = None) -> OccupancyGrid:
     """The ground-truth grid of a scenario: a cell is occupied when its centre lies within
-    ``inflation`` (default: the robot's bounding radius) of an obstacle or of a boundary wall."""
+    ``inflation`` (default: the robot's bounding radius) of a static obstacle or of a boundary wall."""
     inflation = scenario.robot.bounding_radius if inflation is None else inflation
     # Circles and boxes, nearly every obstacle there is, are rasterised compiled; the rest here.
     kinds, params, others = [], [], []
-    for obstacle in scenario.obstacles:
+    for obstacle in scenario.static_obstacles:  # movers are where they start only at the start
         if obstacle.unobstructed:
             continue
         if isinstance(obstacle, CircleObstacle):

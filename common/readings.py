@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
 from common.kernel_cache import kernel
 from common.kinematics import Pose2D
+
+if TYPE_CHECKING:
+    from common.motion.movers import MoverStates
 
 
 class Odometry(NamedTuple):
@@ -28,6 +31,16 @@ class Imu(NamedTuple):
     angular_velocity: tuple[float, float, float]
 
 
+class Contact(NamedTuple):
+    """What the robot touched in a step: ``"static"`` geometry or a ``"mover"`` (``mover``: its row
+    in ``Readings.movers``), and who moved into whom (``by``: ``"robot"`` if it closed on the mover
+    at least as fast as the mover closed on it, else ``"mover"``; always ``"robot"`` for static)."""
+
+    kind: str
+    mover: int
+    by: str
+
+
 class Readings(NamedTuple):
     """One snapshot of a world: later steps never change it (immutable fields, read-only arrays;
     a NamedTuple because one is built every env step and it is the cheapest immutable record).
@@ -41,6 +54,9 @@ class Readings(NamedTuple):
         collided: whether the robot touched an obstacle or a wall in the last step.
         time: simulated seconds since reset.
         camera: RGB, depth and segmentation images where a tier has a camera, else None.
+        movers: where the moving obstacles are (ground truth, for metrics and drawing; a
+            controller sees them only through the lidar), or None in a world without any.
+        contact: what the robot touched this step, in a world with movers (else None).
     """
 
     pose: Pose2D
@@ -51,6 +67,8 @@ class Readings(NamedTuple):
     collided: bool
     time: float
     camera: dict[str, np.ndarray] | None = None
+    movers: "MoverStates | None" = None
+    contact: Contact | None = None
 
 
 def frozen(array: np.ndarray) -> np.ndarray:

@@ -16,41 +16,57 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated, Literal, Union
+from typing import Annotated, Any, Literal, Union
 
 import numpy as np
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import Field, ValidationError, model_validator
 
 from common import geometry
 from common.errors import ConfigError, quote
+from common.fields import (  # noqa: F401  (re-exported: the scenario's caps and types)
+    MAX_COORDINATE,
+    MAX_LENGTH,
+    MAX_SPEED,
+    Acceleration,
+    Angle,
+    Coordinate,
+    Fraction,
+    Frozen,
+    Length,
+    NonNegativeLength,
+    Point,
+    Speed,
+)
 from common.kinematics import Pose2D
+from common.motion.spec import Motion
 from common.polygons import is_simple_polygon
 from common.yaml_io import read_yaml_mapping
 
-MAX_LENGTH = 1000.0  # m: world sides, obstacle and robot sizes, lidar range
-MAX_COORDINATE = 10_000.0  # m: any position
-MAX_SPEED = 100.0  # m/s and rad/s
 MAX_OBSTACLES = 2000
 MAX_VERTICES = 1000  # of one polygon or polyline
 MAX_TOTAL_VERTICES = 10_000  # of all of a scenario's: what loading, building and scanning it costs
-
-Coordinate = Annotated[float, Field(ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
-Point = tuple[Coordinate, Coordinate]
-Length = Annotated[float, Field(gt=0.0, le=MAX_LENGTH)]
-NonNegativeLength = Annotated[float, Field(ge=0.0, le=MAX_LENGTH)]
-Angle = Annotated[float, Field(ge=-1000.0, le=1000.0)]  # rad: any finite heading a person would write
-Speed = Annotated[float, Field(ge=-MAX_SPEED, le=MAX_SPEED)]
-Acceleration = Annotated[float, Field(gt=0.0, allow_inf_nan=True)]  # inf: no limit, IR-SIM's default
-Fraction = Annotated[float, Field(ge=0.0, le=1.0)]
+MAX_MOVERS = 500  # moving obstacles: each is stepped, and stepped among the others, every step
 
 
-class _Frozen(BaseModel):
-    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+def _group_traits(motion: Motion) -> tuple:
+    """What the movers of one group share: a group plans with one behaviour for one kinematics,
+    and ORCA counts the robot among its agents or not (their parameters may differ)."""
+    name = motion.behavior.name
+    return name, motion.kinematics, motion.reacts_to_robot if name == "orca" else None
 
 
-class CircleObstacle(_Frozen):
-    """A cylinder in 3D: centre (x, y), radius."""
+def _absent(value: Any) -> bool:
+    return value is None
+
+
+# Fields added after scenarios were first written (and hashed: tests/test_scenario.py) are left out
+# of a dump while they hold their defaults, so a scenario without them is written as before.
+OMITTED_WHEN_ABSENT = Field(default=None, exclude_if=_absent)
+
+
+class CircleObstacle(Frozen):
+    """A cylinder in 3D: centre (x, y), radius; a person, if it carries a ``motion``."""
 
     type: Literal["circle"] = "circle"
     x: Coordinate
@@ -58,6 +74,9 @@ class CircleObstacle(_Frozen):
     radius: Length
     height: Length = 0.5
     unobstructed: bool = False  # IR-SIM: drawn, but neither seen by lidar nor collided with
+    # A mover's heading at the start; and IR-SIM's polygon of a circle turns with it (common.irsim_geometry).
+    yaw: Angle = Field(default=0.0, exclude_if=lambda yaw: yaw == 0.0)
+    motion: Motion | None = OMITTED_WHEN_ABSENT  # where it goes and how (common.motion.spec); the pose above is its start
 
     def sdf(self, points: np.ndarray) -> np.ndarray:
         """Signed distance from points (N, 2) to this obstacle."""
@@ -68,8 +87,9 @@ class CircleObstacle(_Frozen):
         return self.x - self.radius, self.y - self.radius, self.x + self.radius, self.y + self.radius
 
 
-class BoxObstacle(_Frozen):
-    """A box: centre (x, y), ``length`` along its local x, ``width`` along local y, rotated by ``yaw``."""
+class BoxObstacle(Frozen):
+    """A box: centre (x, y), ``length`` along its local x, ``width`` along local y, rotated by ``yaw``;
+    a forklift or a cart, if it carries a ``motion`` (its yaw is then its heading)."""
 
     type: Literal["box"] = "box"
     x: Coordinate
@@ -79,6 +99,7 @@ class BoxObstacle(_Frozen):
     yaw: Angle = 0.0
     height: Length = 0.5
     unobstructed: bool = False
+    motion: Motion | None = OMITTED_WHEN_ABSENT
 
     def sdf(self, points: np.ndarray) -> np.ndarray:
         """Signed distance from points (N, 2) to this obstacle."""
@@ -93,7 +114,7 @@ class BoxObstacle(_Frozen):
         return _bounds(self.corners())
 
 
-class PolygonObstacle(_Frozen):
+class PolygonObstacle(Frozen):
     """A simple polygon given by its vertices in world coordinates."""
 
     type: Literal["polygon"] = "polygon"
@@ -116,7 +137,7 @@ class PolygonObstacle(_Frozen):
         return _bounds(np.asarray(self.vertices, dtype=float))
 
 
-class SegmentObstacle(_Frozen):
+class SegmentObstacle(Frozen):
     """A polyline of zero thickness (a wall or an IR-SIM ``linestring``)."""
 
     type: Literal["segment"] = "segment"
@@ -144,7 +165,7 @@ Obstacle = Annotated[
 ]
 
 
-class RobotProfile(_Frozen):
+class RobotProfile(Frozen):
     """The robot's footprint, wheels and velocity limits.
 
     The policy's actions map to v in [0, v_max] and w in [-w_max, w_max]; ``v_min`` (negative to allow
@@ -185,7 +206,7 @@ class RobotProfile(_Frozen):
         return self.radius if self.shape == "circle" else 0.5 * math.hypot(self.length, self.width)
 
 
-class LidarSpec(_Frozen):
+class LidarSpec(Frozen):
     """A 2D lidar: beams spread over ``angle_range`` centred on the sensor's heading.
 
     ``offset`` is the mount (x, y, yaw) in the robot frame. Ranges are clipped to
@@ -233,11 +254,14 @@ class LidarSpec(_Frozen):
         return np.linspace(-0.5 * self.angle_range, 0.5 * self.angle_range, self.beams)
 
 
-class WorldSpec(_Frozen):
+class WorldSpec(Frozen):
     """The world rectangle [x0, x0 + width] × [y0, y0 + height], its step time and boundary walls.
 
     ``integrator`` is how a step moves the robot: ``euler`` (heading from the step's start, IR-SIM's
-    update) or ``exact`` (the arc of constant v and w).
+    update) or ``exact`` (the arc of constant v and w). ``collision_mode`` is what a contact does,
+    as IR-SIM's: ``stop`` halts the robot and any mover that touches something; ``unobstructed``
+    halts nothing (contacts are still reported); ``unobstructed_obstacles`` halts the robot and
+    movers whose role is ``robot``, while moving obstacles pass on.
     """
 
     width: Length = 10.0
@@ -246,6 +270,8 @@ class WorldSpec(_Frozen):
     step_time: Annotated[float, Field(gt=0.0, le=10.0)] = 0.1
     walls: bool = True
     integrator: Literal["euler", "exact"] = "euler"
+    collision_mode: Literal["stop", "unobstructed", "unobstructed_obstacles"] = Field(
+        default="stop", exclude_if=lambda mode: mode == "stop")
 
     def contains(self, x: float, y: float, margin: float = 0.0) -> bool:
         """Whether (x, y) lies inside the rectangle, at least ``margin`` from its edges."""
@@ -258,8 +284,15 @@ class WorldSpec(_Frozen):
         return math.hypot(self.width, self.height)
 
 
-class Scenario(_Frozen):
-    """Everything a tier needs to build a world: robot, sensors, world, start, goal, obstacles."""
+class Scenario(Frozen):
+    """Everything a tier needs to build a world: robot, sensors, world, start, goal, obstacles.
+
+    Obstacles with a ``motion`` move (:mod:`common.motion`); their pose is where they start.
+    ``robot_motion`` is the controlled robot's own IR-SIM behaviour, read from an IR-SIM file: the
+    robot follows its commands, but IR-SIM still counts it in its group's plan and draws its
+    wandering goals, so flatland keeps both to stay IR-SIM's.
+    """
+
 
     name: str = "scenario"
     world: WorldSpec = WorldSpec()
@@ -272,6 +305,41 @@ class Scenario(_Frozen):
     kind: str = "custom"
     difficulty: Fraction = 0.0
     seed: int | None = None
+    robot_motion: Motion | None = OMITTED_WHEN_ABSENT
+
+    @model_validator(mode="after")
+    def _movers_fit_the_world(self) -> "Scenario":
+        movers = [(i, o.motion) for i, o in enumerate(self.obstacles) if getattr(o, "motion", None) is not None]
+        if len(movers) > MAX_MOVERS:
+            raise ValueError(f"{len(movers):,} moving obstacles; allowed: at most {MAX_MOVERS}")
+        groups: dict[str, Motion] = {}
+        for index, motion in movers + ([(-1, self.robot_motion)] if self.robot_motion is not None else []):
+            where = "robot_motion" if index < 0 else f"obstacles.{index}.motion"
+            if self.world.walls:  # a walled world cannot be left: every goal must lie inside it
+                for k, (x, y) in enumerate(motion.goals):
+                    if not self.world.contains(x, y):
+                        raise ValueError(f"{where}.goals.{k}: ({x:g}, {y:g}) lies outside the world {self._extent()}; "
+                                         "allowed: inside it")
+                if motion.wander is not None and not (self.world.contains(*motion.wander[:2])
+                                                      and self.world.contains(*motion.wander[2:])):
+                    raise ValueError(f"{where}.wander: {list(motion.wander)} reaches outside the world "
+                                     f"{self._extent()}; allowed: a region inside it")
+            if motion.group is not None:
+                first = groups.setdefault(motion.group, motion)
+                if _group_traits(first) != _group_traits(motion):
+                    raise ValueError(f"{where}.group: the movers of group {motion.group!r} differ in behaviour, "
+                                     "kinematics or (ORCA) whether they see the robot; allowed: one of each per group")
+        return self
+
+    @property
+    def movers(self) -> list[Obstacle]:
+        """The obstacles that move."""
+        return [o for o in self.obstacles if getattr(o, "motion", None) is not None]
+
+    @property
+    def static_obstacles(self) -> list[Obstacle]:
+        """The obstacles that stay where they are."""
+        return [o for o in self.obstacles if getattr(o, "motion", None) is None]
 
     @model_validator(mode="after")
     def _sizes_fit_the_world(self) -> "Scenario":

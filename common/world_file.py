@@ -5,6 +5,8 @@ from __future__ import annotations
 import warnings
 from pathlib import Path
 
+import numpy as np
+
 from common.errors import ScenarioWarning
 from common.scenario import Scenario, scenario_from_mapping
 from common.yaml_io import read_yaml_mapping
@@ -46,21 +48,27 @@ class WorldFile:
             self._reads = ReadCache()  # a new seed re-reads only what it draws
         else:
             self.random = False
-        self.initial = self._parse(0, warn=True)
+        self.initial = self._parse(0, warn=True)[0]
 
     def scenario(self, seed: int = 0) -> Scenario:
         """The file's scenario for ``seed`` (the initial state for seed 0, and for every seed if the file has no randomness)."""
-        return self._parse(seed, warn=False) if self.random and seed != 0 else self.initial
+        return self._parse(seed, warn=False)[0] if self.random and seed != 0 else self.initial
 
-    def _parse(self, seed: int, warn: bool) -> Scenario:
+    def scenario_and_generator(self, seed: int = 0) -> tuple[Scenario, np.random.Generator]:
+        """The file's scenario for ``seed`` and the generator to go on drawing from: an IR-SIM
+        file's where its parse left it (IR-SIM's next draws, e.g. a wanderer's next goal), else
+        one seeded with ``seed``."""
+        return self._parse(seed, warn=False)
+
+    def _parse(self, seed: int, warn: bool) -> tuple[Scenario, np.random.Generator]:
         if not self.irsim:
-            return scenario_from_mapping(self.data, self.path)
-        from common.irsim_format import parse_irsim
+            return scenario_from_mapping(self.data, self.path), np.random.default_rng(seed)
+        from common.irsim_format import parse_irsim_drawing
 
-        scenario = parse_irsim(self.data, source=self.path, seed=seed, reads=self._reads)
+        scenario, generator = parse_irsim_drawing(self.data, source=self.path, seed=seed, reads=self._reads)
         for problem in scenario.placement_problems(self.path) if warn else ():
             warnings.warn(f"{problem} (IR-SIM runs it as it is)", ScenarioWarning, stacklevel=3)
-        return scenario
+        return scenario, generator
 
 
 def read_world_file(path: str | Path, seed: int = 0) -> Scenario:

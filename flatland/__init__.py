@@ -10,15 +10,17 @@ from pathlib import Path
 
 from gymnasium.envs.registration import register, registry
 
-from common.world_file import read_world_file
+from common.world_file import WorldFile
 from flatland.world import World
 
 __all__ = ["World", "load_world"]
 
 
 def load_world(path: str | Path, seed: int | None = 0) -> World:
-    """A World from an IR-SIM world YAML or a project scenario YAML (``seed``: IR-SIM random placement and noise)."""
-    return World(read_world_file(path, seed=seed), seed=seed)
+    """A World from an IR-SIM world YAML or a project scenario YAML (``seed``: IR-SIM's random
+    placement, wandering goals and noise, drawn as ``irsim.make(path, seed=seed)`` draws them)."""
+    scenario, generator = WorldFile(path).scenario_and_generator(0 if seed is None else seed)
+    return World(scenario, seed=seed, rng=generator)
 
 
 if "flatland/Nav-v0" not in registry:

@@ -13,44 +13,10 @@ from __future__ import annotations
 import numpy as np
 from numba.extending import register_jitable
 
-from common.geometry import box_distance, segment_distance
+from common.geometry import segment_box_gap, segment_distance, segments_gap
 from common.kernel_cache import kernel
-from common.polygons import orientation
-from flatland.lidar import slab
 
 _MARGIN = 1e-9  # m: a distance this close to the radius counts as within it (rounding)
-
-
-@kernel
-def segments_gap(ax: float, ay: float, bx: float, by: float, cx: float, cy: float, dx: float, dy: float) -> float:
-    """Distance between the segments AB and CD (0 where they cross)."""
-    if (orientation(ax, ay, bx, by, cx, cy) * orientation(ax, ay, bx, by, dx, dy) < 0.0
-            and orientation(cx, cy, dx, dy, ax, ay) * orientation(cx, cy, dx, dy, bx, by) < 0.0):
-        return 0.0
-    # Apart (or touching, where an end lies on the other segment), the nearest pair has an end in it.
-    return min(segment_distance(ax, ay, cx, cy, dx, dy), segment_distance(bx, by, cx, cy, dx, dy),
-               segment_distance(cx, cy, ax, ay, bx, by), segment_distance(dx, dy, ax, ay, bx, by))
-
-
-@kernel
-def segment_box_gap(ax: float, ay: float, bx: float, by: float, cx: float, cy: float, c: float, s: float,
-                    half_length: float, half_width: float) -> float:
-    """Distance between the segment AB and a box (centre, yaw cosine and sine, half sides); 0 where
-    the segment enters it."""
-    ux, uy = c * (ax - cx) + s * (ay - cy), -s * (ax - cx) + c * (ay - cy)
-    vx, vy = c * (bx - cx) + s * (by - cy), -s * (bx - cx) + c * (by - cy)
-    # The segment's parameter range [0, 1] narrowed to the box's two slabs: anything left is inside.
-    low, high = slab(ux, vx - ux, half_length, 0.0, 1.0)
-    low, high = slab(uy, vy - uy, half_width, low, high)
-    if low <= high:
-        return 0.0
-    # Outside, the nearest pair is a segment end and the box, or a box corner and the segment.
-    length, width = 2.0 * half_length, 2.0 * half_width
-    gap = min(box_distance(ax, ay, cx, cy, length, width, c, s), box_distance(bx, by, cx, cy, length, width, c, s))
-    for kx, ky in ((half_length, half_width), (-half_length, half_width), (-half_length, -half_width),
-                   (half_length, -half_width)):
-        gap = min(gap, segment_distance(kx, ky, ux, uy, vx, vy))
-    return gap
 
 
 @register_jitable

@@ -49,6 +49,8 @@ def free_step(x, y, yaw, odometry_x, odometry_y, odometry_yaw, v, w, constants, 
     out[0], out[1], out[2] = end
     out[3], out[4], out[5] = odometry
     out[6], out[7] = odometry_v, odometry_w
+    if ranges.shape[0] == 0:
+        return True
     sensor_x, sensor_y = sensor_origin(end[0], end[1], end[2], constants[5], constants[6])
     cast_scan(sensor_x, sensor_y, end[2] + constants[7], constants[8], circles, boxes, segments, constants[9], ranges)
     return True

@@ -13,6 +13,7 @@ import math
 import numpy as np
 from numba.extending import register_jitable
 
+from common.geometry import slab
 from common.kernel_cache import kernel
 from common.scenario import LidarSpec
 
@@ -30,15 +31,6 @@ def _hit_circle(ox, oy, dx, dy, cx, cy, r):
         return math.inf
     # From inside, the beam reads where it leaves the obstacle, as in IR-SIM.
     return -b - math.sqrt(disc) if c > 0.0 else -b + math.sqrt(disc)
-
-
-@kernel(inline="always")
-def slab(p, q, half, t_near, t_far):
-    """Narrow [t_near, t_far] to where p + t q lies within [-half, half] (empty: t_near > t_far)."""
-    if q == 0.0:
-        return (t_near, t_far) if abs(p) <= half else (math.inf, -math.inf)
-    t1, t2 = (-half - p) / q, (half - p) / q
-    return max(t_near, min(t1, t2)), min(t_far, max(t1, t2))
 
 
 @kernel(inline="always")
@@ -156,12 +148,18 @@ class Lidar:
         mount_x, mount_y, _ = self.spec.offset
         return sensor_origin(x, y, yaw, mount_x, mount_y)
 
-    def scan(self, x: float, y: float, yaw: float) -> np.ndarray:
-        """Ranges for a robot at (x, y, yaw), in beam order; a new array each call."""
+    def scan(self, x: float, y: float, yaw: float, circles: np.ndarray | None = None,
+             boxes: np.ndarray | None = None) -> np.ndarray:
+        """Ranges for a robot at (x, y, yaw), in beam order; a new array each call. ``circles`` and
+        ``boxes`` (rows as the constructor's) are seen too: the movers, where they are now."""
         ox, oy = self.origin(x, y, yaw)
         ranges = np.empty(self.spec.beams)
-        cast_scan(ox, oy, yaw + self.first_beam, self.beam_step, self.circles, self.boxes, self.segments,
-                  self.spec.range_max, ranges)
+        if circles is not None:
+            circles, boxes = np.concatenate((self.circles, circles)), np.concatenate((self.boxes, boxes))
+        else:
+            circles, boxes = self.circles, self.boxes
+        cast_scan(ox, oy, yaw + self.first_beam, self.beam_step, circles, boxes, self.segments, self.spec.range_max,
+                  ranges)
         return self.finish(ranges)
 
     def finish(self, ranges: np.ndarray) -> np.ndarray:

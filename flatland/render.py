@@ -1,7 +1,9 @@
-"""Matplotlib drawing of a flatland world: obstacles, robot, lidar beams, goal, trajectory.
+"""Matplotlib drawing of a flatland world: obstacles, movers, robot, lidar beams, goal, trajectory.
 
 ``rgb_array`` frames come from an off-screen Agg canvas (no display needed); ``human`` uses a
-pyplot window. Static parts are drawn once; each frame only moves the robot, beams and path.
+pyplot window. Static parts are drawn once; each frame only moves the robot, the movers (people
+orange, forklifts and carts brown, other movers grey, each with its velocity over the next
+second), the beams and the path.
 """
 
 from __future__ import annotations
@@ -22,6 +24,9 @@ from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenar
 if TYPE_CHECKING:
     from common.conditions import Conditions
     from common.evaluation import Episode
+
+
+MOVER_COLOURS = {"person": "tab:orange", "forklift": "tab:brown", "cart": "tab:brown"}
 
 
 def _obstacle_patch(obstacle) -> patches.Patch | None:
@@ -63,6 +68,18 @@ class Renderer:
         (self.path_line,) = self.axes.plot([], [], color="tab:blue", linewidth=1.0, alpha=0.7)
         self.beams = LineCollection([], colors="tab:red", linewidths=0.5, alpha=0.5)
         self.axes.add_collection(self.beams)
+        self.movers: list[patches.Patch] = []
+        for obstacle in scenario.movers:
+            colour = MOVER_COLOURS.get(obstacle.motion.label, "0.5")
+            if isinstance(obstacle, CircleObstacle):
+                patch: patches.Patch = patches.Circle((obstacle.x, obstacle.y), obstacle.radius, facecolor=colour,
+                                                      edgecolor="0.1", linewidth=0.6, alpha=0.9)
+            else:
+                patch = patches.Polygon(obstacle.corners(), closed=True, facecolor=colour, edgecolor="0.1", alpha=0.9)
+            self.axes.add_patch(patch)
+            self.movers.append(patch)
+        self.mover_arrows = LineCollection([], colors="0.1", linewidths=1.0)
+        self.axes.add_collection(self.mover_arrows)
         self.title = self.axes.set_title("")
 
     def _draw_static(self) -> None:
@@ -76,7 +93,7 @@ class Renderer:
         ax.set_ylabel("y [m]")
         if world.walls:
             ax.add_patch(patches.Rectangle((x0, y0), world.width, world.height, fill=False, edgecolor="black", linewidth=2))
-        for obstacle in self.scenario.obstacles:
+        for obstacle in self.scenario.static_obstacles:
             patch = _obstacle_patch(obstacle)
             if patch is not None:
                 ax.add_patch(patch)
@@ -110,12 +127,24 @@ class Renderer:
         if len(trajectory):
             path = np.asarray(trajectory)
             self.path_line.set_data(path[:, 0], path[:, 1])
+        if readings.movers is not None:
+            self._draw_movers(readings.movers.rows)
         self.title.set_text(caption or f"t = {readings.time:.1f} s" + ("  collision" if readings.collided else ""))
         if self.human:
             import matplotlib.pyplot as plt
 
             self.figure.canvas.draw_idle()
             plt.pause(0.001)
+
+    def _draw_movers(self, rows: np.ndarray) -> None:
+        for patch, (x, y, yaw, _, _, _, length, width) in zip(self.movers, rows):
+            if isinstance(patch, patches.Circle):
+                patch.center = (x, y)
+            else:
+                c, s = math.cos(yaw), math.sin(yaw)
+                local = np.array([[length, width], [-length, width], [-length, -width], [length, -width]]) * 0.5
+                patch.set_xy(local @ np.array([[c, s], [-s, c]]) + (x, y))
+        self.mover_arrows.set_segments([[(x, y), (x + vx, y + vy)] for x, y, _, vx, vy, *_ in rows])
 
     def frame(self) -> np.ndarray:
         """The current picture as an (H, W, 3) uint8 array."""

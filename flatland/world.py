@@ -22,8 +22,9 @@ import pymunk
 from common.actuation import Actuator, WheelDynamics
 from common.conditions import Conditions
 from common.kinematics import INTEGRATORS, Pose2D, WheelOdometry, wheel_speeds, wrap_angle
+from common.motion.movers import Movers
 from flatland.polygons import convex_pieces
-from common.readings import Imu, Odometry, Readings, frozen
+from common.readings import Contact, Imu, Odometry, Readings, frozen
 from common.geometry import box_corner_table
 from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, SegmentObstacle, WorldSpec
 from flatland.clearance import path_clear, swept_capsule
@@ -62,12 +63,19 @@ class World:
     :class:`Readings` snapshot. ``conditions`` (:mod:`common.conditions`; flatland's defaults: an
     ideal robot) may change the robot, its sensors' noise and its actuation; ``world.scenario`` is
     the scenario as conditioned.
+
+    The scenario's movers (:mod:`common.motion`) step after the robot, as in IR-SIM, and the lidar
+    sees them where they end the step. The robot's contact with one is judged where both end the
+    step (as IR-SIM judges every contact), and in ``stop`` mode it lasts only while they touch: a
+    mover that walks away frees the robot. ``rng``: the generator to draw from (default one seeded
+    with ``seed``; an IR-SIM file's, to keep drawing where IR-SIM's parse left off).
     """
 
-    def __init__(self, scenario: Scenario, seed: int | None = None, conditions: Conditions | None = None) -> None:
+    def __init__(self, scenario: Scenario, seed: int | None = None, conditions: Conditions | None = None,
+                 rng: np.random.Generator | None = None) -> None:
         self.conditions = (conditions or Conditions()).for_tier("flatland")
         scenario = self.scenario = self.conditions.scenario(scenario)
-        self.rng = np.random.default_rng(seed)
+        self.rng = np.random.default_rng(seed) if rng is None else rng
         robot = scenario.robot
         first_order = self.conditions.dynamics == "first_order"
         self.actuator = Actuator(WheelDynamics(robot.wheel_radius, robot.wheel_base) if first_order else None)
@@ -90,8 +98,8 @@ class World:
             mount_x=scenario.lidar.offset[0], mount_y=scenario.lidar.offset[1], first_beam=self.lidar.first_beam,
             beam_step=self.lidar.beam_step, range_max=scenario.lidar.range_max)
         self._moved = np.empty(8)
-        # Seeding a Generator costs more than a noise-free episode's reset: skipped where nothing draws.
-        self._draws = self.conditions.draws(scenario)
+        self._halts = scenario.world.collision_mode != "unobstructed"
+        self._use_movers(scenario)
         self._dt = scenario.world.step_time
         self._limits = (robot.v_min, robot.v_max, robot.w_low, robot.w_max)
         self._accel = (robot.accel_v * self._dt, robot.accel_w * self._dt)
@@ -99,8 +107,15 @@ class World:
         self.pose = scenario.start_pose
         self.velocity = (0.0, 0.0)
         self.stopped = False
+        self._touching_static = False
         self.steps = 0
         self.readings: Readings | None = None
+
+    def _use_movers(self, scenario: Scenario) -> None:
+        """Build the scenario's movers (None without any), and note whether an episode draws."""
+        self.movers = Movers(scenario) if scenario.movers or scenario.robot_motion is not None else None
+        # Seeding a Generator costs more than a noise-free episode's reset: skipped where nothing draws.
+        self._draws = self.conditions.draws(scenario) or (self.movers is not None and self.movers.draws)
 
     def load(self, scenario: Scenario) -> bool:
         """Swap in another scenario's obstacles, start and goal, keeping the space, the robot and
@@ -113,6 +128,7 @@ class World:
             return False
         self.scenario = scenario
         self.lidar.place(*self._add_obstacles(scenario))
+        self._use_movers(scenario)
         self.pose = scenario.start_pose
         return True
 
@@ -137,7 +153,7 @@ class World:
         if self._pieces:
             self.space.remove(*self._pieces)
         self._pieces = []
-        for obstacle in scenario.obstacles:
+        for obstacle in scenario.static_obstacles:
             if obstacle.unobstructed:
                 continue
             if isinstance(obstacle, CircleObstacle):
@@ -208,7 +224,8 @@ class World:
         return {info.shape for info in self.space.shape_query(self.footprint)}
 
     def reset(self, seed: int | None = None) -> Readings:
-        """Put the robot at the start, at rest; reseed the noise if ``seed`` is given."""
+        """Put the robot at the start, at rest, and the movers at theirs; reseed what draws if
+        ``seed`` is given."""
         if seed is not None and self._draws:
             self.rng = np.random.default_rng(seed)
             self.lidar.rng = self.odometry.rng = self.rng
@@ -219,13 +236,22 @@ class World:
         self.actuator.reset(drawn.action_delay, drawn.motor_gain)
         self.odometry.reset(self.pose)
         # As in IR-SIM, contact is judged after a move: a start that overlaps may still drive out.
-        self.stopped = False
-        self.readings = self._read(0.0, self.lidar.scan(*self.pose))
+        self.stopped = self._touching_static = False
+        if self.movers is None:
+            self.readings = self._read(0.0, self.lidar.scan(*self.pose))
+            return self.readings
+        self.movers.reset()
+        self.movers.sync_robot(self.pose, 0.0, 0.0, False)
+        self.readings = self._read(0.0, self.lidar.scan(*self.pose, *self.movers.visible()), None)
         return self.readings
 
     def step(self, v: float, w: float) -> Readings:
         """Drive with (v m/s, w rad/s) for one step and return the new readings."""
         ranges = None
+        movers = self.movers
+        if movers is not None:
+            movers.sync_robot(self.pose, *self.velocity, self.stopped)
+            movers.plan()
         if self.stopped:
             v = w = 0.0
         else:
@@ -233,31 +259,58 @@ class World:
             if not self.actuator.idle:
                 v, w = self.actuator(v, w, self._dt)
             if self._compiled:
-                ranges = self._free_step(v, w)
+                ranges = self._free_step(v, w, scan=movers is None)
             if ranges is None:
-                self.pose, self.stopped = self._move(self.pose, v, w, test_clear=not self._compiled)
+                self.pose, self._touching_static = self._move(self.pose, v, w, test_clear=not self._compiled)
+            else:
+                self._touching_static = False
         if ranges is None:
             left, right = wheel_speeds(v, w, self.odometry.wheel_radius, self.odometry.wheel_base)
             self.odometry.update(left, right, self._dt)
-            ranges = self.lidar.scan(*self.pose)
         previous_v = self.velocity[0]
         self.velocity = (v, w)
         self.steps += 1
-        self.readings = self._read((v - previous_v) / self._dt, ranges)
+        acceleration = (v - previous_v) / self._dt
+        if movers is None:
+            self.stopped = self._touching_static and self._halts
+            self.readings = self._read(acceleration, self.lidar.scan(*self.pose) if ranges is None else ranges)
+            return self.readings
+        movers.sync_robot(self.pose, v, w, self.stopped)
+        movers.advance(self.rng)
+        touched = movers.settle()
+        contact = None
+        if self._touching_static:
+            contact = Contact("static", -1, "robot")
+        elif touched >= 0:
+            contact = Contact("mover", touched, self._fault(movers.states().rows[touched]))
+        self.stopped = contact is not None and self._halts
+        self.readings = self._read(acceleration, self.lidar.scan(*self.pose, *movers.visible()), contact)
         return self.readings
 
-    def _free_step(self, v: float, w: float) -> np.ndarray | None:
+    def _fault(self, mover: np.ndarray) -> str:
+        """Who moved into whom: the robot, if it closed on the mover at least as fast as the mover
+        closed on it (``mover``: a row of :meth:`Movers.states`)."""
+        x, y, yaw = self.pose
+        dx, dy = mover[0] - x, mover[1] - y
+        distance = math.hypot(dx, dy) or 1.0
+        v = self.velocity[0]
+        robot_closing = v * (math.cos(yaw) * dx + math.sin(yaw) * dy) / distance
+        mover_closing = -(mover[3] * dx + mover[4] * dy) / distance
+        return "robot" if robot_closing >= mover_closing else "mover"
+
+    def _free_step(self, v: float, w: float, scan: bool = True) -> np.ndarray | None:
         """The compiled step (:mod:`flatland.free_step`) if the move touches nothing: pose and
-        odometry advanced, the new scan returned. None, with nothing changed, if it may touch."""
+        odometry advanced, the new scan returned (empty without ``scan``). None, with nothing
+        changed, if it may touch."""
         lidar, odometry, moved = self.lidar, self.odometry, self._moved
-        ranges = np.empty(lidar.spec.beams)
+        ranges = np.empty(lidar.spec.beams if scan else 0)
         if not free_step(*self.pose, *odometry.pose, v, w, self._constants, lidar.circles, lidar.boxes,
                          lidar.segments, self._solids, ranges, moved):
             return None
         x, y, yaw, odometry_x, odometry_y, odometry_yaw, odometry.v, odometry.w = moved.tolist()
         self.pose = Pose2D(x, y, yaw)
         odometry.pose = Pose2D(odometry_x, odometry_y, odometry_yaw)
-        return lidar.finish(ranges)
+        return lidar.finish(ranges) if scan else ranges
 
     def _clip(self, v: float, w: float) -> tuple[float, float]:
         v_lo, v_hi, w_lo, w_hi = self._limits
@@ -279,9 +332,12 @@ class World:
         stop mode does (so poses match IR-SIM's). If the first thing touched is behind the end pose
         (a thin wall jumped in one step, a wall a spinning box's corner swung through), it halts
         where it first touched it: IR-SIM, which checks end poses only, would let it through.
-        ``test_clear=False``: the compiled step has already found something near the path.
+        ``test_clear=False``: the compiled step has already found something near the path. In
+        ``unobstructed`` mode nothing halts the robot: it ends at the end pose, touching or not.
         """
         end = self._integrate(start, v, w, self._dt)
+        if not self._halts:
+            return end, self.overlaps(end)
         # Nothing within the swept capsule, nothing touched: decided without pymunk's Python layer,
         # which costs more than the rest of a move.
         lidar = self.lidar
@@ -334,10 +390,15 @@ class World:
             previous = pose
         return None
 
-    def _read(self, acceleration: float, ranges: np.ndarray) -> Readings:
+    def _read(self, acceleration: float, ranges: np.ndarray, contact: Contact | None = None) -> Readings:
         v, w = self.velocity
         odometry = self.odometry
         # Fields by position (pose, velocity, odometry, lidar, imu, collided, time): by keyword the
         # record costs twice as much to build, once a step.
+        if self.movers is None:
+            return Readings(self.pose, self.velocity, Odometry(odometry.pose, odometry.v, odometry.w), frozen(ranges),
+                            Imu((acceleration, v * w, GRAVITY), (0.0, 0.0, w)), self._touching_static,
+                            self.steps * self._dt)
         return Readings(self.pose, self.velocity, Odometry(odometry.pose, odometry.v, odometry.w), frozen(ranges),
-                        Imu((acceleration, v * w, GRAVITY), (0.0, 0.0, w)), self.stopped, self.steps * self._dt)
+                        Imu((acceleration, v * w, GRAVITY), (0.0, 0.0, w)), contact is not None, self.steps * self._dt,
+                        None, self.movers.states(), contact)

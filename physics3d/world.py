@@ -16,6 +16,7 @@ import pybullet as p
 
 from common.actuation import Actuator
 from common.conditions import Conditions
+from common.errors import ConfigError
 from common.kinematics import Pose2D, WheelOdometry, unicycle_exact, wrap_angle
 from common.readings import Odometry, Readings, frozen
 from common.scenario import Scenario
@@ -31,6 +32,19 @@ SETTLE_SUBSTEPS = 24  # at build: let the robot sink into its contacts before th
 # A contact point nearer than this counts as touching. Bullet keeps manifold points until they
 # separate by 2 cm, so a robot that has just slid past a box still lists it for a few sub-steps.
 TOUCH_DISTANCE = 1e-3  # m
+
+
+def refuse_motion(scenario: Scenario) -> None:
+    """A one-line error for what this tier cannot build yet: obstacles that move, and IR-SIM's
+    collision modes other than ``stop`` (a world that loaded and then stood still would be wrong
+    without a word)."""
+    for index, obstacle in enumerate(scenario.obstacles):
+        if getattr(obstacle, "motion", None) is not None:
+            raise ConfigError(None, f"obstacles.{index}.motion", "the 3D tier does not move obstacles yet; "
+                              "allowed: static obstacles (run moving worlds in flatland)")
+    if scenario.world.collision_mode != "stop":
+        raise ConfigError(None, "world.collision_mode", f"{scenario.world.collision_mode!r} is not modelled in the "
+                          "3D tier; allowed: stop")
 
 
 class World:
@@ -54,6 +68,7 @@ class World:
 
     def __init__(self, scenario: Scenario, seed: int | None = None, conditions: Conditions | None = None,
                  gui: bool = False, camera: bool = False) -> None:
+        refuse_motion(scenario)
         if gui and sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
             # PyBullet's GUI waits forever for a window it cannot open; fail instead.
             raise RuntimeError("the PyBullet GUI needs an X display (DISPLAY is not set); try xvfb-run")
@@ -73,6 +88,7 @@ class World:
 
     def load(self, scenario: Scenario) -> None:
         """Replace everything with the world of ``scenario``, in the same client (a GUI window stays open)."""
+        refuse_motion(scenario)
         c = self.client
         scenario = self.conditions.scenario(scenario)
         if self.gui:

@@ -141,7 +141,7 @@ def test_segment_gaps_to_boxes_and_segments_match_sampled_distances():
     """The two exact gaps path_clear is built on, against the distance of many points along the
     segment: crossing, grazing, parallel and apart, with long segments through small boxes."""
     from common.geometry import box_sdf, segments_distance
-    from flatland.clearance import segment_box_gap, segments_gap
+    from common.geometry import segment_box_gap, segments_gap
 
     rng = np.random.default_rng(0)
     for _ in range(2000):
@@ -503,9 +503,9 @@ def _drive_counting_compiled(world: World, commands: np.ndarray) -> tuple[list[R
     taken = 0
     python_free_step = world._free_step
 
-    def counting(v: float, w: float):
+    def counting(v: float, w: float, **options):
         nonlocal taken
-        ranges = python_free_step(v, w)
+        ranges = python_free_step(v, w, **options)
         taken += ranges is not None
         return ranges
 

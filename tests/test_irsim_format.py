@@ -106,7 +106,7 @@ def test_list_and_mapping_robot_agree(tmp_path):
     assert as_mapping == as_list
 
 
-def test_further_robots_become_static_obstacles(tmp_path):
+def test_further_robots_are_obstacles_that_move_as_irsims_behaviour_says(tmp_path):
     scenario = load(tmp_path, """\
 robot:
   - kinematics: {name: diff}
@@ -115,11 +115,18 @@ robot:
   - kinematics: {name: omni}
     shape: {name: rectangle, length: 0.4, width: 0.2}
     state: [5, 5, 0.5]
+    goal: [7, 6]
     behavior: {name: dash}
+  - kinematics: {name: diff}
+    shape: {name: circle, radius: 0.2}
+    state: [3, 3, 0]
 """)
     assert scenario.robot.radius == 0.3 and scenario.start == (1.0, 1.0, 0.0)
-    (box,) = scenario.obstacles
+    box, still = scenario.obstacles
     assert isinstance(box, BoxObstacle) and (box.x, box.y, box.yaw, box.length) == (5.0, 5.0, 0.5, 0.4)
+    motion = box.motion
+    assert (motion.behavior.name, motion.kinematics, motion.goals, motion.role) == ("dash", "omni", [(7.0, 6.0)], "robot")
+    assert still.motion is None  # no behaviour: IR-SIM leaves it where it is
 
 
 def test_robot_number_expands_in_order(tmp_path):

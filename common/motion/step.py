@@ -1,0 +1,377 @@
+"""One step of the movers, in IR-SIM's order and arithmetic, compiled.
+
+A step is: the groups plan from one snapshot (:func:`plan_groups`); each mover in object order
+starts its step (:func:`prepare`: a stopped mover halts, an arrived one takes its next goal),
+finds its command (its group's plan, ``dash``, or the social force among the others where they
+are now; ``rvo`` is computed in Python by the caller) and moves (:func:`move`); then every mover
+is judged (:func:`settle`): arrival, which pops its goal queue, and contact, which stops it where
+the collision mode says. :func:`advance` runs the per-mover part in one call when no mover uses
+``rvo``. The functions are plain Python where called from Python (``register_jitable``), so the
+slow path and the compiled one compute the same bits.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba.extending import register_jitable
+
+from common.geometry import box_distance, points_in_polygon, segment_box_gap, segment_distance
+from common.irsim_geometry import centroid, transformed
+from common.kernel_cache import kernel
+from common.kinematics import unicycle_euler
+from common.motion.orca import orca_velocities
+from common.motion.sfm import social_force_velocity
+from common.motion.steering import diff_dash, omni_dash, omni_to_world, world_to_diff, world_to_omni
+from common.motion.table import (
+    ACC0, ACC1, ANGLE_TOLERANCE, ARRIVED, BOX, DIFF, DRIVEN, EXTEND, GOAL_THRESHOLD, GROUP, HEAD, KINEMATICS,
+    LENGTH, LOOP, OBSTACLE, OBSTACLES, OR, OROLE, ORCA, OVX, OVY, OX, OY, PLAN0, PLAN1, PLANNED, RADIUS, REACTS, ROBOT,
+    ROBOTS, ROLE, ROUTE_LENGTH, ROW, SEEN_RADIUS, SFM, SHAPE, OUTLINE, START_X, START_Y, STOPPED, TAIL, TARGET, THETA, UNOBSTRUCTED, V0, V1,
+    VMAX0, VMAX1, VMIN0, VMIN1, WANDER, WANDER_X0, WANDER_X1, WANDER_Y0, WANDER_Y1, WIDTH, X, Y, BEHAVIOR,
+)
+
+STOP, UNOBSTRUCTED_ALL, UNOBSTRUCTED_OBSTACLES = range(3)  # collision modes, as WorldSpec names them
+COLLISION_MODES = ("stop", "unobstructed", "unobstructed_obstacles")
+
+
+@register_jitable
+def velocity_range(F: np.ndarray, m: int, dt: float) -> tuple[float, float, float, float]:
+    """The command window (low 0, low 1, high 0, high 1): the limits, narrowed to what the
+    acceleration reaches from the last command (IR-SIM's ``get_vel_range``)."""
+    lo0, lo1, hi0, hi1 = F[m, VMIN0], F[m, VMIN1], F[m, VMAX0], F[m, VMAX1]
+    if math.isinf(F[m, ACC0]) and math.isinf(F[m, ACC1]):
+        return lo0, lo1, hi0, hi1
+    w0, w1 = F[m, ACC0] * dt, F[m, ACC1] * dt
+    return max(lo0, F[m, V0] - w0), max(lo1, F[m, V1] - w1), min(hi0, F[m, V0] + w0), min(hi1, F[m, V1] + w1)
+
+
+@register_jitable
+def world_velocity(kinematics: int, theta: float, c0: float, c1: float) -> tuple[float, float]:
+    """A command's world-frame velocity (IR-SIM's ``velocity_xy``)."""
+    if kinematics == DIFF:
+        return c0 * math.cos(theta), c0 * math.sin(theta)
+    return omni_to_world(theta, c0, c1)
+
+
+@register_jitable
+def desired_velocity(F: np.ndarray, I: np.ndarray, goals: np.ndarray, m: int) -> tuple[float, float]:  # noqa: E741
+    """Full speed toward the current goal, zero within 0.1 m of it (IR-SIM's ``desired_omni_vel``)."""
+    gx, gy = goals[m, I[m, HEAD], 0], goals[m, I[m, HEAD], 1]
+    distance = math.hypot(gx - F[m, X], gy - F[m, Y])
+    if distance <= 0.1:
+        return 0.0, 0.0
+    bearing = math.atan2(gy - F[m, Y], gx - F[m, X])
+    speed_y = F[m, VMAX0] if I[m, KINEMATICS] == DIFF else F[m, VMAX1]
+    return F[m, VMAX0] * math.cos(bearing), speed_y * math.sin(bearing)
+
+
+@register_jitable
+def sees(I: np.ndarray, objects: np.ndarray, m: int, row: int) -> bool:  # noqa: E741
+    """Whether mover ``m``'s behaviour takes object ``row`` into account (not itself, not a line,
+    the robot only if it reacts to it, and only the roles it targets)."""
+    if row == I[m, ROW] or objects[row, OR] < 0.0:
+        return False
+    if row == 0 and I[m, REACTS] == 0:
+        return False
+    target = I[m, TARGET]
+    if target == ROBOTS:
+        return objects[row, OROLE] == ROBOT
+    if target == OBSTACLES:
+        return objects[row, OROLE] == OBSTACLE
+    return True
+
+
+@register_jitable
+def gather(I: np.ndarray, objects: np.ndarray, m: int, out: np.ndarray) -> int:  # noqa: E741
+    """Write the objects mover ``m`` reacts to into ``out`` as rows x, y, vx, vy, radius; their count."""
+    count = 0
+    for row in range(objects.shape[0]):
+        if sees(I, objects, m, row):
+            out[count, 0], out[count, 1] = objects[row, OX], objects[row, OY]
+            out[count, 2], out[count, 3], out[count, 4] = objects[row, OVX], objects[row, OVY], objects[row, OR]
+            count += 1
+    return count
+
+
+@register_jitable
+def to_command(F: np.ndarray, I: np.ndarray, m: int, vx: float, vy: float, w_max: float, dt: float,  # noqa: E741
+               tolerance: float) -> tuple[float, float]:
+    """A planned world-frame velocity as the mover's command."""
+    if I[m, KINEMATICS] == DIFF:
+        return world_to_diff(F[m, THETA], vx, vy, w_max, dt, tolerance, 0.02)
+    return world_to_omni(F[m, THETA], vx, vy)
+
+
+@register_jitable
+def _sfm(F, I, params, goals, objects, segments, m, neighbors, count, dt):  # noqa: E741
+    """The social-force command of mover ``m`` among the first ``count`` rows of ``neighbors``."""
+    row = I[m, ROW]
+    desired_x, desired_y = desired_velocity(F, I, goals, m)
+    vx, vy = social_force_velocity(F[m, X], F[m, Y], objects[row, OVX], objects[row, OVY], F[m, SEEN_RADIUS] + EXTEND,
+                                   desired_x, desired_y, neighbors, count, segments, params[m])
+    w_max = velocity_range(F, m, dt)[3]
+    return to_command(F, I, m, vx, vy, w_max, dt, 0.02)
+
+
+@kernel
+def plan_groups(F, I, params, goals, objects, segments, orca_velocity, groups, dt, neighbors):  # noqa: E741
+    """Every group's commands from one snapshot of the world, into PLAN0/PLAN1 (PLANNED set)."""
+    n = F.shape[0]
+    for g in range(groups):
+        members = np.array([m for m in range(n) if I[m, GROUP] == g], dtype=np.int64)
+        if members.shape[0] == 0:
+            continue
+        if I[members[0], BEHAVIOR] == ORCA:
+            _plan_orca(F, I, params, goals, orca_velocity, members, dt)
+        else:
+            _plan_sfm(F, I, params, goals, objects, segments, members, dt, neighbors)
+        for m in members:
+            I[m, PLANNED] = 1
+
+
+@register_jitable
+def _plan_orca(F, I, params, goals, orca_velocity, members, dt):  # noqa: E741
+    k = members.shape[0]
+    positions, preferred = np.empty((k, 2), dtype=np.float32), np.empty((k, 2), dtype=np.float32)
+    velocities, out = np.empty((k, 2), dtype=np.float32), np.empty((k, 2), dtype=np.float32)
+    radii, speeds = np.empty(k, dtype=np.float32), np.empty(k, dtype=np.float32)
+    reach, horizons = np.empty(k, dtype=np.float32), np.empty(k, dtype=np.float32)
+    limit = np.empty(k, dtype=np.int64)
+    for j in range(k):
+        m = members[j]
+        p = params[m]
+        speed = p[4]
+        if I[m, KINEMATICS] == DIFF:
+            gx, gy = goals[m, I[m, HEAD], 0], goals[m, I[m, HEAD], 1]
+            bearing = math.atan2(gy - F[m, Y], gx - F[m, X])
+            px, py = speed * math.cos(bearing), speed * math.sin(bearing)
+        else:
+            dx, dy = desired_velocity(F, I, goals, m)
+            norm = math.hypot(dx, dy)
+            px, py = (0.0, 0.0) if norm < 1e-9 else (speed * dx / norm, speed * dy / norm)
+        positions[j, 0], positions[j, 1] = F[m, X], F[m, Y]
+        preferred[j, 0], preferred[j, 1] = px, py
+        velocities[j] = orca_velocity[m]
+        radii[j] = F[m, SEEN_RADIUS] + p[3]
+        speeds[j], reach[j], limit[j], horizons[j] = speed, p[0], int(p[1]), p[2]
+    orca_velocities(positions, velocities, preferred, radii, speeds, reach, limit, horizons, np.float32(dt), out)
+    for j in range(k):
+        m = members[j]
+        orca_velocity[m] = out[j]
+        F[m, PLAN0], F[m, PLAN1] = to_command(F, I, m, np.float64(out[j, 0]), np.float64(out[j, 1]), F[m, VMAX1], dt, 0.1)
+
+
+@register_jitable
+def _plan_sfm(F, I, params, goals, objects, segments, members, dt, neighbors):  # noqa: E741
+    k = members.shape[0]
+    for j in range(k):
+        m = members[j]
+        count = 0
+        for other in members:  # the group first, then the objects outside it, as IR-SIM stacks them
+            if other != m:
+                row = I[other, ROW]
+                neighbors[count, 0], neighbors[count, 1] = objects[row, OX], objects[row, OY]
+                neighbors[count, 2], neighbors[count, 3] = objects[row, OVX], objects[row, OVY]
+                neighbors[count, 4] = objects[row, OR]
+                count += 1
+        for row in range(objects.shape[0]):
+            if sees(I, objects, m, row) and not _is_member(I, members, row):
+                neighbors[count, 0], neighbors[count, 1] = objects[row, OX], objects[row, OY]
+                neighbors[count, 2], neighbors[count, 3] = objects[row, OVX], objects[row, OVY]
+                neighbors[count, 4] = objects[row, OR]
+                count += 1
+        F[m, PLAN0], F[m, PLAN1] = _sfm(F, I, params, goals, objects, segments, m, neighbors, count, dt)
+
+
+@register_jitable
+def _is_member(I, members, row):  # noqa: E741
+    for m in members:
+        if I[m, ROW] == row:
+            return True
+    return False
+
+
+@register_jitable
+def prepare(F, I, goals, routes, objects, m, rng) -> bool:  # noqa: E741
+    """Start mover ``m``'s step: a stopped mover halts (False); an arrived one takes its next goal
+    (a wanderer draws it from ``rng``, a loop starts over)."""
+    if I[m, STOPPED] == 1:
+        F[m, V0] = F[m, V1] = 0.0
+        row = I[m, ROW]
+        objects[row, OVX] = objects[row, OVY] = 0.0
+        return False
+    if I[m, WANDER] == 1 and I[m, ARRIVED] == 1:
+        # IR-SIM draws x, y and a heading it never uses.
+        x = F[m, WANDER_X0] + (F[m, WANDER_X1] - F[m, WANDER_X0]) * rng.random()
+        y = F[m, WANDER_Y0] + (F[m, WANDER_Y1] - F[m, WANDER_Y0]) * rng.random()
+        rng.random()
+        goals[m, 0, 0], goals[m, 0, 1] = x, y
+        I[m, HEAD], I[m, TAIL], I[m, ARRIVED] = 0, 1, 0
+    if I[m, LOOP] == 1 and I[m, ARRIVED] == 1:
+        length = I[m, ROUTE_LENGTH]
+        if length > 1:
+            goals[m, :length] = routes[m, :length]
+        else:  # one goal: back and forth between it and the start
+            goals[m, 0] = routes[m, 0]
+            goals[m, 1, 0], goals[m, 1, 1] = F[m, START_X], F[m, START_Y]
+            length = 2
+        I[m, HEAD], I[m, TAIL], I[m, ARRIVED] = 0, length, 0
+    return I[m, DRIVEN] == 0
+
+
+@register_jitable
+def command(F, I, params, goals, objects, segments, m, dt, neighbors) -> tuple[float, float]:  # noqa: E741
+    """Mover ``m``'s command this step, unless it uses ``rvo`` (the caller's)."""
+    if I[m, PLANNED] == 1:
+        return F[m, PLAN0], F[m, PLAN1]
+    gx, gy = goals[m, I[m, HEAD], 0], goals[m, I[m, HEAD], 1]
+    if I[m, BEHAVIOR] == SFM:
+        return _sfm(F, I, params, goals, objects, segments, m, neighbors, gather(I, objects, m, neighbors), dt)
+    lo0, lo1, hi0, hi1 = velocity_range(F, m, dt)
+    if I[m, KINEMATICS] == DIFF:
+        c0, c1 = diff_dash(F[m, X], F[m, Y], F[m, THETA], gx, gy, F[m, VMAX0], F[m, VMAX1], F[m, GOAL_THRESHOLD],
+                           F[m, ANGLE_TOLERANCE], F[m, ACC1], dt)
+    else:
+        c0, c1 = omni_dash(F[m, X], F[m, Y], F[m, THETA], gx, gy, F[m, VMAX0], F[m, VMAX1], F[m, GOAL_THRESHOLD])
+    return min(max(c0, lo0), hi0), min(max(c1, lo1), hi1)
+
+
+@register_jitable
+def place_disc(objects, outlines, irsim, row, outline, x, y, theta) -> None:
+    """Put an object's disc where its body is: its centre, or in an IR-SIM world the GEOS centroid of
+    its polygon (the first ``outline`` rows of ``outlines``) placed at (x, y, theta)."""
+    if irsim:
+        objects[row, OX], objects[row, OY] = centroid(transformed(outlines[:outline], x, y, theta))
+    else:
+        objects[row, OX], objects[row, OY] = x, y
+
+
+@register_jitable
+def move(F, I, objects, outlines, irsim, m, c0, c1, dt) -> None:  # noqa: E741
+    """Apply a command to mover ``m`` for one step (clipped to its window; IR-SIM's kinematics)."""
+    lo0, lo1, hi0, hi1 = velocity_range(F, m, dt)
+    c0, c1 = min(max(c0, lo0), hi0), min(max(c1, lo1), hi1)
+    theta = F[m, THETA]
+    if I[m, KINEMATICS] == DIFF:
+        x, y, theta = unicycle_euler((F[m, X], F[m, Y], theta), c0, c1, dt)
+    else:
+        dx, dy = omni_to_world(theta, c0, c1)
+        x, y = F[m, X] + dx * dt, F[m, Y] + dy * dt
+    F[m, X], F[m, Y], F[m, THETA], F[m, V0], F[m, V1] = x, y, theta, c0, c1
+    row = I[m, ROW]
+    place_disc(objects, outlines[m], irsim, row, I[m, OUTLINE], x, y, theta)
+    objects[row, OVX], objects[row, OVY] = world_velocity(I[m, KINEMATICS], theta, c0, c1)
+
+
+@kernel
+def advance(F, I, params, goals, routes, objects, segments, outlines, irsim, dt, rng, neighbors) -> None:  # noqa: E741
+    """Every mover's step in order (none of them uses ``rvo``)."""
+    for m in range(F.shape[0]):
+        if prepare(F, I, goals, routes, objects, m, rng):
+            c0, c1 = command(F, I, params, goals, objects, segments, m, dt, neighbors)
+            move(F, I, objects, outlines, irsim, m, c0, c1, dt)
+
+
+@register_jitable
+def _touches_static(shape, x, y, theta, r, length, width, circles, boxes, segments, rings, ring_index) -> bool:
+    """Whether a body (a circle of radius r, or a box of length and width at heading theta) touches
+    the static geometry (see :func:`common.motion.table.static_contacts`)."""
+    c, s, hl, hw = math.cos(theta), math.sin(theta), 0.5 * length, 0.5 * width
+    for k in range(circles.shape[0]):
+        if shape == BOX:
+            if box_distance(circles[k, 0], circles[k, 1], x, y, length, width, c, s) <= circles[k, 2]:
+                return True
+        elif math.hypot(x - circles[k, 0], y - circles[k, 1]) <= r + circles[k, 2]:
+            return True
+    for k in range(boxes.shape[0]):
+        bx, by, bc, bs, bhl, bhw = boxes[k, 0], boxes[k, 1], boxes[k, 2], boxes[k, 3], boxes[k, 4], boxes[k, 5]
+        if shape == BOX:
+            if not (_box_axes_separate(x, y, c, s, hl, hw, bx, by, bc, bs, bhl, bhw)
+                    or _box_axes_separate(bx, by, bc, bs, bhl, bhw, x, y, c, s, hl, hw)):
+                return True
+        elif box_distance(x, y, bx, by, 2.0 * bhl, 2.0 * bhw, bc, bs) <= r:
+            return True
+    for k in range(segments.shape[0]):
+        x1, y1, x2, y2 = segments[k, 0], segments[k, 1], segments[k, 2], segments[k, 3]
+        gap = segment_box_gap(x1, y1, x2, y2, x, y, c, s, hl, hw) if shape == BOX else segment_distance(x, y, x1, y1,
+                                                                                                       x2, y2) - r
+        if gap <= 0.0:
+            return True
+    point = np.array([[x, y]])
+    for k in range(ring_index.shape[0]):
+        first, count = ring_index[k, 0], ring_index[k, 1]
+        if points_in_polygon(point, rings[first:first + count])[0]:
+            return True
+    return False
+
+
+@register_jitable
+def _box_axes_separate(ax, ay, ac, as_, ahl, ahw, bx, by, bc, bs, bhl, bhw) -> bool:
+    """Whether one of box a's two axes separates it from box b."""
+    for ux, uy, half in ((ac, as_, ahl), (-as_, ac, ahw)):
+        centre = (bx - ax) * ux + (by - ay) * uy
+        reach = abs(bhl * (bc * ux + bs * uy)) + abs(bhw * (-bs * ux + bc * uy))
+        if abs(centre) > half + reach:
+            return True
+    return False
+
+
+@register_jitable
+def bodies_touch(shape_a, xa, ya, ta, ra, la, wa, shape_b, xb, yb, tb, rb, lb, wb) -> bool:
+    """Whether two bodies (a circle of radius r, or a box of length l and width w at heading t) touch."""
+    if shape_a == BOX and shape_b == BOX:
+        ca, sa, cb, sb = math.cos(ta), math.sin(ta), math.cos(tb), math.sin(tb)
+        return not (_box_axes_separate(xa, ya, ca, sa, 0.5 * la, 0.5 * wa, xb, yb, cb, sb, 0.5 * lb, 0.5 * wb)
+                    or _box_axes_separate(xb, yb, cb, sb, 0.5 * lb, 0.5 * wb, xa, ya, ca, sa, 0.5 * la, 0.5 * wa))
+    if shape_a == BOX:
+        return box_distance(xb, yb, xa, ya, la, wa, math.cos(ta), math.sin(ta)) <= rb
+    if shape_b == BOX:
+        return box_distance(xa, ya, xb, yb, lb, wb, math.cos(tb), math.sin(tb)) <= ra
+    return math.hypot(xa - xb, ya - yb) <= ra + rb
+
+
+@register_jitable
+def _touch(F, I, a, b) -> bool:  # noqa: E741
+    return bodies_touch(I[a, SHAPE], F[a, X], F[a, Y], F[a, THETA], F[a, RADIUS], F[a, LENGTH], F[a, WIDTH],
+                        I[b, SHAPE], F[b, X], F[b, Y], F[b, THETA], F[b, RADIUS], F[b, LENGTH], F[b, WIDTH])
+
+
+@kernel
+def settle(F, I, goals, robot, mode, circles, boxes, segments, rings, ring_index) -> int:  # noqa: E741
+    """Judge every mover after the step: arrival at its goal (the queue moves on, or it has
+    arrived), contact with the static geometry, the robot (``robot``: shape, x, y, heading,
+    radius, length, width) or another mover, and the collision mode's stop; the first mover the
+    robot touches (-1: none). Clears the step's plans."""
+    n = F.shape[0]
+    touched = -1
+    for m in range(n):
+        I[m, PLANNED] = 0
+        head = I[m, HEAD]
+        if math.hypot(F[m, X] - goals[m, head, 0], F[m, Y] - goals[m, head, 1]) < F[m, GOAL_THRESHOLD]:
+            if I[m, TAIL] - head == 1:
+                I[m, ARRIVED] = 1
+            else:
+                I[m, HEAD], I[m, ARRIVED] = head + 1, 0
+        else:
+            I[m, ARRIVED] = 0
+    for m in range(n):
+        if I[m, DRIVEN] == 1:
+            continue
+        hits_robot = I[m, UNOBSTRUCTED] == 0 and bodies_touch(
+            int(robot[0]), robot[1], robot[2], robot[3], robot[4], robot[5], robot[6],
+            I[m, SHAPE], F[m, X], F[m, Y], F[m, THETA], F[m, RADIUS], F[m, LENGTH], F[m, WIDTH])
+        if hits_robot and touched < 0:
+            touched = m
+        stops = mode == STOP or (mode == UNOBSTRUCTED_OBSTACLES and I[m, ROLE] == ROBOT)
+        if not stops:
+            continue
+        colliding = hits_robot or _touches_static(I[m, SHAPE], F[m, X], F[m, Y], F[m, THETA], F[m, RADIUS], F[m, LENGTH],
+                                                  F[m, WIDTH], circles, boxes, segments, rings, ring_index)
+        for other in range(n):
+            if colliding:
+                break
+            if other != m and I[other, UNOBSTRUCTED] == 0 and I[other, DRIVEN] == 0:
+                colliding = _touch(F, I, m, other)
+        I[m, STOPPED] = int(colliding)
+    return touched
