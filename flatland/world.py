@@ -99,6 +99,7 @@ class World:
             beam_step=self.lidar.beam_step, range_max=scenario.lidar.range_max)
         self._moved = np.empty(8)
         self._halts = scenario.world.collision_mode != "unobstructed"
+        self._kept_movers: dict[int, tuple[Scenario, Movers]] = {}
         self._use_movers(scenario)
         self._dt = scenario.world.step_time
         self._limits = (robot.v_min, robot.v_max, robot.w_low, robot.w_max)
@@ -112,8 +113,16 @@ class World:
         self.readings: Readings | None = None
 
     def _use_movers(self, scenario: Scenario) -> None:
-        """Build the scenario's movers (None without any), and note whether an episode draws."""
-        self.movers = Movers(scenario) if scenario.movers or scenario.robot_motion is not None else None
+        """The scenario's movers (None without any; the last few scenarios' are kept, as an env
+        drawing from a list comes back to them), and whether an episode draws."""
+        self.movers = None
+        if scenario.robot_motion is not None or any(getattr(o, "motion", None) is not None for o in scenario.obstacles):
+            kept = self._kept_movers.get(id(scenario))
+            if kept is None or kept[0] is not scenario:
+                if len(self._kept_movers) >= 64:
+                    self._kept_movers.clear()
+                kept = self._kept_movers[id(scenario)] = (scenario, Movers(scenario))
+            self.movers = kept[1]
         # Seeding a Generator costs more than a noise-free episode's reset: skipped where nothing draws.
         self._draws = self.conditions.draws(scenario) or (self.movers is not None and self.movers.draws)
 
@@ -241,7 +250,6 @@ class World:
             self.readings = self._read(0.0, self.lidar.scan(*self.pose))
             return self.readings
         self.movers.reset()
-        self.movers.sync_robot(self.pose, 0.0, 0.0, False)
         self.readings = self._read(0.0, self.lidar.scan(*self.pose, *self.movers.visible()), None)
         return self.readings
 
@@ -250,8 +258,7 @@ class World:
         ranges = None
         movers = self.movers
         if movers is not None:
-            movers.sync_robot(self.pose, *self.velocity, self.stopped)
-            movers.plan()
+            movers.begin(self.pose, *self.velocity, self.stopped)
         if self.stopped:
             v = w = 0.0
         else:
@@ -275,9 +282,7 @@ class World:
             self.stopped = self._touching_static and self._halts
             self.readings = self._read(acceleration, self.lidar.scan(*self.pose) if ranges is None else ranges)
             return self.readings
-        movers.sync_robot(self.pose, v, w, self.stopped)
-        movers.advance(self.rng)
-        touched = movers.settle()
+        touched = movers.finish(self.pose, v, w, self.stopped, self.rng)
         contact = None
         if self._touching_static:
             contact = Contact("static", -1, "robot")

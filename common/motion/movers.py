@@ -1,31 +1,29 @@
 """A scenario's moving obstacles, advanced step by step the same way in every tier.
 
-A tier builds :class:`Movers` from its scenario and, each step: tells it where the robot is and
-how it moves (:meth:`Movers.sync_robot`), lets the groups plan (:meth:`Movers.plan`), moves the
-robot itself, tells it again, advances the movers (:meth:`Movers.advance`) and judges them
-(:meth:`Movers.settle`): IR-SIM's order, the robot first. The movers' poses then go into the
-tier's sensors. Everything random (a wanderer's next goal) is drawn from the generator the tier
-passes, so a seed fixes the episode.
+A tier builds :class:`Movers` from its scenario and, each step, calls :meth:`Movers.begin` with
+where the robot is and the command it moved with (the groups plan from that snapshot), moves the
+robot itself, then calls :meth:`Movers.finish` with where it went: the movers step after it, as
+in IR-SIM, and are judged. The movers' poses then go into the tier's sensors. Everything random
+(a wanderer's next goal) is drawn from the generator the tier passes, so a seed fixes the episode.
 """
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 import numpy as np
 
-from common.motion.rvo import rvo_velocity
 from common.irsim_geometry import circle_outline, rectangle_outline
+from common.motion.rvo import rvo_velocity
 from common.motion.step import (
-    COLLISION_MODES, advance, command, desired_velocity, gather, move, place_disc, plan_groups, prepare, settle,
-    world_velocity,
+    COLLISION_MODES, begin_step, command, desired_velocity, draw_wanderers, finish_step, gather, move, prepare,
+    snapshot, sync_robot,
 )
 from common.motion.steering import world_to_diff, world_to_omni
 from common.motion.table import (
-    ARRIVED, BEHAVIOR, BOX, DIFF, DRIVEN, EXTEND, GROUP, HEAD, INIT_THETA, INIT_V0, INIT_V1, KINEMATICS, LENGTH, OVX,
-    OVY, PLANNED, RADIUS, ROBOTS, SEEN_RADIUS, ROUTE_LENGTH, ROW, RVO, RVO_MODE, RVO_MODES, SHAPE, START_X, START_Y, STOPPED,
-    TAIL, TARGET, THETA, UNOBSTRUCTED, V0, V1, WANDER, WIDTH, X, Y, MoverTable, mover_table, static_contacts,
+    ARRIVED, BEHAVIOR, BOX, DIFF, DRIVEN, EXTEND, GROUP, HEAD, INIT_THETA, INIT_V0, INIT_V1, KINEMATICS, OVX, OVY,
+    PLANNED, ROBOTS, ROUTE_LENGTH, ROW, RVO, RVO_MODE, RVO_MODES, SEEN_RADIUS, SHAPE, START_X, START_Y, STOPPED, TAIL,
+    TARGET, THETA, UNOBSTRUCTED, V0, V1, WANDER, X, Y, MoverTable, mover_table, static_contacts,
 )
 from common.scenario import Scenario
 
@@ -45,26 +43,33 @@ class Movers:
     def __init__(self, scenario: Scenario) -> None:
         self.scenario = scenario
         self.table: MoverTable = mover_table(scenario)
-        I = self.table.I  # noqa: E741
+        t = self.table
+        I = t.I  # noqa: E741
         self._moving = np.flatnonzero(I[:, DRIVEN] == 0)
         self.count = len(self._moving)
-        self.labels = tuple(self.table.labels[m] for m in self._moving)
-        self._circles = self._moving[(I[self._moving, SHAPE] != BOX) & (I[self._moving, UNOBSTRUCTED] == 0)]
-        self._boxes = self._moving[(I[self._moving, SHAPE] == BOX) & (I[self._moving, UNOBSTRUCTED] == 0)]
+        self.labels = tuple(t.labels[m] for m in self._moving)
+        seen = I[self._moving, UNOBSTRUCTED] == 0
+        self._circles = self._moving[(I[self._moving, SHAPE] != BOX) & seen]
+        self._boxes = self._moving[(I[self._moving, SHAPE] == BOX) & seen]
         self._contacts = static_contacts(scenario)
         self._dt = scenario.world.step_time
         self._mode = COLLISION_MODES.index(scenario.world.collision_mode)
-        self._groups = int(I[:, GROUP].max(initial=-1)) + 1
+        self._members, self._inside = _groups(I, len(t.objects))
         self._python = bool((I[:, BEHAVIOR] == RVO).any())  # IR-SIM's rvo is NumPy: a Python loop
         self.draws = bool(I[:, WANDER].any())  # whether an episode draws random numbers
-        self._neighbors = np.zeros((len(self.table.objects) + len(self.table.F), 5))
-        self._initial_objects = self.table.objects.copy()
+        self._wanderer_arrived = False
+        self._neighbors = np.zeros((len(t.objects) + len(t.F), 5))
+        self._initial_objects = t.objects.copy()
+        self._states = np.empty((self.count, 8))
+        self._circle_rows, self._box_rows = np.empty((len(self._circles), 3)), np.empty((len(self._boxes), 6))
         robot = scenario.robot
         # The robot's body for contacts: shape, x, y, heading, radius, length, width.
         self._robot = np.array([BOX if robot.shape == "box" else 0, 0.0, 0.0, 0.0, robot.bounding_radius, robot.length,
                                 robot.width])
-        self._robot_outline = (rectangle_outline(robot.length, robot.width) if robot.shape == "box"
-                               else circle_outline(robot.radius))
+        self._outline = np.zeros((0, 2))  # the robot's polygon, for IR-SIM's view of it
+        if t.irsim:
+            self._outline = rectangle_outline(robot.length, robot.width) if robot.shape == "box" else \
+                circle_outline(robot.radius)
         self.reset()
 
     def reset(self) -> None:
@@ -78,37 +83,42 @@ class Movers:
         I[:, HEAD], I[:, TAIL] = 0, np.maximum(I[:, ROUTE_LENGTH], 1)
         t.orca_velocity[:] = 0.0
         t.objects[:] = self._initial_objects
-        for m in self._moving:
-            row = I[m, ROW]
-            t.objects[row, OVX], t.objects[row, OVY] = world_velocity(I[m, KINEMATICS], F[m, THETA], F[m, V0], F[m, V1])
+        self._wanderer_arrived = False
+        m, rows = self._moving, I[self._moving, ROW]
+        c, s, v0, v1 = np.cos(F[m, THETA]), np.sin(F[m, THETA]), F[m, V0], F[m, V1]
+        diff = I[m, KINEMATICS] == DIFF  # the two cases of step.world_velocity, for every mover at once
+        t.objects[rows, OVX] = np.where(diff, v0 * c, v0 * c - v1 * s)
+        t.objects[rows, OVY] = np.where(diff, v0 * s, v0 * s + v1 * c)
+        self._snapshot()
 
-    def sync_robot(self, pose: tuple[float, float, float], v: float, w: float, stopped: bool) -> None:
-        """Tell the movers where the controlled robot is and the command it moves with."""
+    def begin(self, pose: tuple[float, float, float], v: float, w: float, stopped: bool) -> None:
+        """Start a step: the robot is at ``pose`` and last moved with (v, w); the groups plan."""
         t = self.table
-        x, y, yaw = pose
-        place_disc(t.objects, self._robot_outline, t.irsim, 0, len(self._robot_outline), x, y, yaw)
-        t.objects[0, OVX], t.objects[0, OVY] = v * math.cos(yaw), v * math.sin(yaw)
-        self._robot[1:4] = x, y, yaw
-        if len(self._moving) < len(t.F):  # the robot's own row (it comes first)
-            t.F[0, X], t.F[0, Y], t.F[0, THETA], t.F[0, V0], t.F[0, V1] = x, y, yaw, v, w
-            t.I[0, STOPPED] = int(stopped)
+        begin_step(t.F, t.I, t.params, t.goals, t.objects, t.segments, t.orca_velocity, self._members, self._inside,
+                   self._dt, self._neighbors, self._outline, t.irsim, self._robot, *pose, v, w, stopped)
 
-    def plan(self) -> None:
-        """The groups' commands for this step, from where everything is now."""
-        if self._groups:
-            t = self.table
-            plan_groups(t.F, t.I, t.params, t.goals, t.objects, t.segments, t.orca_velocity, self._groups, self._dt,
-                        self._neighbors)
-
-    def advance(self, rng: np.random.Generator) -> None:
-        """Each mover's step, in order; a wanderer's next goal drawn from ``rng``."""
+    def finish(self, pose: tuple[float, float, float], v: float, w: float, stopped: bool,
+               rng: np.random.Generator) -> int:
+        """End the step: the robot went to ``pose`` with (v, w); every mover steps (a wanderer's
+        next goal drawn from ``rng``) and is judged. The index (a row of :meth:`states`) of the
+        first mover the robot touches, or -1."""
         t = self.table
-        if not self._python:
-            advance(t.F, t.I, t.params, t.goals, t.routes, t.objects, t.segments, t.outlines, t.irsim, self._dt, rng,
-                    self._neighbors)
-            return
+        if self._wanderer_arrived:
+            draw_wanderers(t.F, t.I, t.goals, rng)
+        if self._python:
+            self._advance_in_python(pose, v, w, stopped)
+        touched, self._wanderer_arrived = finish_step(
+            t.F, t.I, t.params, t.goals, t.routes, t.objects, t.segments, t.outlines, t.irsim, self._dt,
+            self._neighbors, self._outline, self._robot, *pose, v, w, stopped, self._python, self._mode,
+            *self._contacts, self._moving, self._circles, self._boxes, self._states, self._circle_rows, self._box_rows)
+        return -1 if touched < 0 else int(np.searchsorted(self._moving, touched))
+
+    def _advance_in_python(self, pose: tuple[float, float, float], v: float, w: float, stopped: bool) -> None:
+        """Every mover's step, in order, with IR-SIM's rvo (NumPy) where a mover has it."""
+        t = self.table
+        sync_robot(t.F, t.I, t.objects, self._outline, t.irsim, self._robot, *pose, v, w, stopped)
         for m in range(len(t.F)):
-            if not prepare(t.F, t.I, t.goals, t.routes, t.objects, m, rng):
+            if not prepare(t.F, t.I, t.goals, t.routes, t.objects, m):
                 continue
             if t.I[m, BEHAVIOR] == RVO and not t.I[m, PLANNED]:
                 c0, c1 = self._rvo(m)
@@ -136,28 +146,28 @@ class Movers:
             w = world_to_diff(F[m, THETA], desired[0], desired[1], 1.5, 0.2, 0.1, 0.02)[1]
         return v, w
 
-    def settle(self) -> int:
-        """Judge the step: arrivals, contacts and stops; the index (a row of :meth:`states`) of
-        the first mover the robot touches, or -1."""
-        t = self.table
-        touched = settle(t.F, t.I, t.goals, self._robot, self._mode, *self._contacts)
-        return -1 if touched < 0 else int(np.searchsorted(self._moving, touched))
-
     def states(self) -> MoverStates:
         """The movers' poses, velocities and sizes now (the controlled robot's own row left out)."""
-        t, m = self.table, self._moving
-        F, rows = t.F, t.I[self._moving, ROW]
-        boxes = t.I[m, SHAPE] == BOX
-        table = np.column_stack([F[m, X], F[m, Y], F[m, THETA], t.objects[rows, OVX], t.objects[rows, OVY],
-                                 F[m, RADIUS], np.where(boxes, F[m, LENGTH], 0.0), np.where(boxes, F[m, WIDTH], 0.0)])
-        table.flags.writeable = False
-        return MoverStates(table, self.labels)
+        return MoverStates(self._states.copy(), self.labels)
 
     def visible(self) -> tuple[np.ndarray, np.ndarray]:
-        """What a lidar sees of the movers: circles (x, y, r) and boxes (x, y, cos, sin, half
-        length, half width), unobstructed ones left out."""
-        F, c, b = self.table.F, self._circles, self._boxes
-        circles = np.column_stack([F[c, X], F[c, Y], F[c, RADIUS]])
-        boxes = np.column_stack([F[b, X], F[b, Y], np.cos(F[b, THETA]), np.sin(F[b, THETA]), 0.5 * F[b, LENGTH],
-                                 0.5 * F[b, WIDTH]])
-        return circles, boxes
+        """What a lidar sees of the movers now: circles (x, y, r) and boxes (x, y, cos, sin, half
+        length, half width), unobstructed ones left out (arrays the next step overwrites)."""
+        return self._circle_rows, self._box_rows
+
+    def _snapshot(self) -> None:
+        t = self.table
+        snapshot(t.F, t.I, t.objects, self._moving, self._circles, self._boxes, self._states, self._circle_rows,
+                 self._box_rows)
+
+
+def _groups(I: np.ndarray, objects: int) -> tuple[np.ndarray, np.ndarray]:  # noqa: E741
+    """Each group's movers in order, as rows padded with -1, and whether each object row belongs to it."""
+    count = int(I[:, GROUP].max(initial=-1)) + 1
+    members = [np.flatnonzero(I[:, GROUP] == g) for g in range(count)]
+    table = np.full((count, max((len(m) for m in members), default=0)), -1, dtype=np.int64)
+    inside = np.zeros((count, objects), dtype=np.bool_)
+    for g, rows in enumerate(members):
+        table[g, :len(rows)] = rows
+        inside[g, I[rows, ROW]] = True
+    return table, inside

@@ -1,13 +1,15 @@
 """One step of the movers, in IR-SIM's order and arithmetic, compiled.
 
 A step is: the groups plan from one snapshot (:func:`plan_groups`); each mover in object order
-starts its step (:func:`prepare`: a stopped mover halts, an arrived one takes its next goal),
-finds its command (its group's plan, ``dash``, or the social force among the others where they
-are now; ``rvo`` is computed in Python by the caller) and moves (:func:`move`); then every mover
-is judged (:func:`settle`): arrival, which pops its goal queue, and contact, which stops it where
-the collision mode says. :func:`advance` runs the per-mover part in one call when no mover uses
-``rvo``. The functions are plain Python where called from Python (``register_jitable``), so the
-slow path and the compiled one compute the same bits.
+starts its step (:func:`prepare`: a stopped mover halts, an arrived one takes its next goal; a
+wanderer's was drawn before the step, by :func:`draw_wanderers`), finds its command (its group's
+plan, ``dash``, or the social force among the others where they are now; ``rvo`` is the caller's,
+in Python) and moves (:func:`move`); then every mover is judged (:func:`settle`): arrival, which
+pops its goal queue, and contact, which stops it where the collision mode says.
+:func:`begin_step` and :func:`finish_step` are the two compiled calls a step makes around the
+robot's own move (a call costs microseconds a piece; a crowd's step, tens of them). The other
+functions are plain Python where called from Python (``register_jitable``), so the slow path and
+the compiled one compute the same bits.
 """
 
 from __future__ import annotations
@@ -23,12 +25,14 @@ from common.kernel_cache import kernel
 from common.kinematics import unicycle_euler
 from common.motion.orca import orca_velocities
 from common.motion.sfm import social_force_velocity
-from common.motion.steering import diff_dash, omni_dash, omni_to_world, world_to_diff, world_to_omni
+from common.motion.steering import (
+    desired_omni_velocity, diff_dash, omni_dash, omni_to_world, world_to_diff, world_to_omni, wrap_to_pi,
+)
 from common.motion.table import (
-    ACC0, ACC1, ANGLE_TOLERANCE, ARRIVED, BOX, DIFF, DRIVEN, EXTEND, GOAL_THRESHOLD, GROUP, HEAD, KINEMATICS,
-    LENGTH, LOOP, OBSTACLE, OBSTACLES, OR, OROLE, ORCA, OVX, OVY, OX, OY, PLAN0, PLAN1, PLANNED, RADIUS, REACTS, ROBOT,
-    ROBOTS, ROLE, ROUTE_LENGTH, ROW, SEEN_RADIUS, SFM, SHAPE, OUTLINE, START_X, START_Y, STOPPED, TAIL, TARGET, THETA, UNOBSTRUCTED, V0, V1,
-    VMAX0, VMAX1, VMIN0, VMIN1, WANDER, WANDER_X0, WANDER_X1, WANDER_Y0, WANDER_Y1, WIDTH, X, Y, BEHAVIOR,
+    ACC0, ACC1, ANGLE_TOLERANCE, ARRIVED, BEHAVIOR, BOX, DIFF, DRIVEN, EXTEND, GOAL_THRESHOLD, HEAD, KINEMATICS, LENGTH,
+    LOOP, OBSTACLE, OBSTACLES, OR, ORCA, OROLE, OUTLINE, OVX, OVY, OX, OY, PLAN0, PLAN1, PLANNED, RADIUS, REACTS, ROBOT,
+    ROBOTS, ROLE, ROUTE_LENGTH, ROW, SEEN_RADIUS, SFM, SHAPE, START_X, START_Y, STOPPED, TAIL, TARGET, THETA,
+    UNOBSTRUCTED, V0, V1, VMAX0, VMAX1, VMIN0, VMIN1, WANDER, WANDER_X0, WANDER_X1, WANDER_Y0, WANDER_Y1, WIDTH, X, Y,
 )
 
 STOP, UNOBSTRUCTED_ALL, UNOBSTRUCTED_OBSTACLES = range(3)  # collision modes, as WorldSpec names them
@@ -57,13 +61,9 @@ def world_velocity(kinematics: int, theta: float, c0: float, c1: float) -> tuple
 @register_jitable
 def desired_velocity(F: np.ndarray, I: np.ndarray, goals: np.ndarray, m: int) -> tuple[float, float]:  # noqa: E741
     """Full speed toward the current goal, zero within 0.1 m of it (IR-SIM's ``desired_omni_vel``)."""
-    gx, gy = goals[m, I[m, HEAD], 0], goals[m, I[m, HEAD], 1]
-    distance = math.hypot(gx - F[m, X], gy - F[m, Y])
-    if distance <= 0.1:
-        return 0.0, 0.0
-    bearing = math.atan2(gy - F[m, Y], gx - F[m, X])
     speed_y = F[m, VMAX0] if I[m, KINEMATICS] == DIFF else F[m, VMAX1]
-    return F[m, VMAX0] * math.cos(bearing), speed_y * math.sin(bearing)
+    return desired_omni_velocity(F[m, X], F[m, Y], goals[m, I[m, HEAD], 0], goals[m, I[m, HEAD], 1], F[m, VMAX0],
+                                 speed_y, 0.1)
 
 
 @register_jitable
@@ -88,9 +88,7 @@ def gather(I: np.ndarray, objects: np.ndarray, m: int, out: np.ndarray) -> int: 
     count = 0
     for row in range(objects.shape[0]):
         if sees(I, objects, m, row):
-            out[count, 0], out[count, 1] = objects[row, OX], objects[row, OY]
-            out[count, 2], out[count, 3], out[count, 4] = objects[row, OVX], objects[row, OVY], objects[row, OR]
-            count += 1
+            count = _add_neighbor(objects, row, out, count)
     return count
 
 
@@ -114,37 +112,43 @@ def _sfm(F, I, params, goals, objects, segments, m, neighbors, count, dt):  # no
     return to_command(F, I, m, vx, vy, w_max, dt, 0.02)
 
 
-@kernel
-def plan_groups(F, I, params, goals, objects, segments, orca_velocity, groups, dt, neighbors):  # noqa: E741
-    """Every group's commands from one snapshot of the world, into PLAN0/PLAN1 (PLANNED set)."""
-    n = F.shape[0]
-    for g in range(groups):
-        members = np.array([m for m in range(n) if I[m, GROUP] == g], dtype=np.int64)
-        if members.shape[0] == 0:
-            continue
-        if I[members[0], BEHAVIOR] == ORCA:
-            _plan_orca(F, I, params, goals, orca_velocity, members, dt)
+@register_jitable
+def plan_groups(F, I, params, goals, objects, segments, orca_velocity, members, inside, dt, neighbors):  # noqa: E741
+    """Every group's commands from one snapshot of the world, into PLAN0/PLAN1 (PLANNED set).
+    ``members[g]``: group g's movers in order (-1 after the last); ``inside[g, row]``: whether
+    object ``row`` belongs to group g."""
+    for g in range(members.shape[0]):
+        count = 0
+        while count < members.shape[1] and members[g, count] >= 0:
+            count += 1
+        group = members[g, :count]
+        if I[group[0], BEHAVIOR] == ORCA:
+            _plan_orca(F, I, params, goals, objects, orca_velocity, group, inside[g], dt)
         else:
-            _plan_sfm(F, I, params, goals, objects, segments, members, dt, neighbors)
-        for m in members:
+            _plan_sfm(F, I, params, goals, objects, segments, group, inside[g], dt, neighbors)
+        for m in group:
             I[m, PLANNED] = 1
 
 
 @register_jitable
-def _plan_orca(F, I, params, goals, orca_velocity, members, dt):  # noqa: E741
+def _plan_orca(F, I, params, goals, objects, orca_velocity, members, inside, dt):  # noqa: E741
+    """ORCA among the group (RVO2, as IR-SIM runs it); a group that sees the robot without it being
+    a member counts it as one more agent, moving as it moves (its own plan is dropped)."""
     k = members.shape[0]
-    positions, preferred = np.empty((k, 2), dtype=np.float32), np.empty((k, 2), dtype=np.float32)
-    velocities, out = np.empty((k, 2), dtype=np.float32), np.empty((k, 2), dtype=np.float32)
-    radii, speeds = np.empty(k, dtype=np.float32), np.empty(k, dtype=np.float32)
-    reach, horizons = np.empty(k, dtype=np.float32), np.empty(k, dtype=np.float32)
-    limit = np.empty(k, dtype=np.int64)
+    extra = 1 if I[members[0], REACTS] == 1 and not inside[0] else 0
+    n = k + extra
+    positions, preferred = np.empty((n, 2), dtype=np.float32), np.empty((n, 2), dtype=np.float32)
+    velocities, out = np.empty((n, 2), dtype=np.float32), np.empty((n, 2), dtype=np.float32)
+    radii, speeds = np.empty(n, dtype=np.float32), np.empty(n, dtype=np.float32)
+    reach, horizons = np.empty(n, dtype=np.float32), np.empty(n, dtype=np.float32)
+    limit = np.empty(n, dtype=np.int64)
     for j in range(k):
         m = members[j]
         p = params[m]
         speed = p[4]
         if I[m, KINEMATICS] == DIFF:
             gx, gy = goals[m, I[m, HEAD], 0], goals[m, I[m, HEAD], 1]
-            bearing = math.atan2(gy - F[m, Y], gx - F[m, X])
+            bearing = wrap_to_pi(math.atan2(gy - F[m, Y], gx - F[m, X]))
             px, py = speed * math.cos(bearing), speed * math.sin(bearing)
         else:
             dx, dy = desired_velocity(F, I, goals, m)
@@ -155,6 +159,13 @@ def _plan_orca(F, I, params, goals, orca_velocity, members, dt):  # noqa: E741
         velocities[j] = orca_velocity[m]
         radii[j] = F[m, SEEN_RADIUS] + p[3]
         speeds[j], reach[j], limit[j], horizons[j] = speed, p[0], int(p[1]), p[2]
+    if extra:
+        p = params[members[0]]
+        positions[k, 0], positions[k, 1] = objects[0, OX], objects[0, OY]
+        velocities[k, 0], velocities[k, 1] = objects[0, OVX], objects[0, OVY]
+        preferred[k] = velocities[k]
+        radii[k] = objects[0, OR] - EXTEND + p[3]
+        speeds[k], reach[k], limit[k], horizons[k] = max(math.hypot(objects[0, OVX], objects[0, OVY]), 1e-3), p[0], 0, p[2]
     orca_velocities(positions, velocities, preferred, radii, speeds, reach, limit, horizons, np.float32(dt), out)
     for j in range(k):
         m = members[j]
@@ -163,51 +174,35 @@ def _plan_orca(F, I, params, goals, orca_velocity, members, dt):  # noqa: E741
 
 
 @register_jitable
-def _plan_sfm(F, I, params, goals, objects, segments, members, dt, neighbors):  # noqa: E741
-    k = members.shape[0]
-    for j in range(k):
-        m = members[j]
+def _plan_sfm(F, I, params, goals, objects, segments, members, inside, dt, neighbors):  # noqa: E741
+    for m in members:
         count = 0
         for other in members:  # the group first, then the objects outside it, as IR-SIM stacks them
             if other != m:
-                row = I[other, ROW]
-                neighbors[count, 0], neighbors[count, 1] = objects[row, OX], objects[row, OY]
-                neighbors[count, 2], neighbors[count, 3] = objects[row, OVX], objects[row, OVY]
-                neighbors[count, 4] = objects[row, OR]
-                count += 1
+                count = _add_neighbor(objects, I[other, ROW], neighbors, count)
         for row in range(objects.shape[0]):
-            if sees(I, objects, m, row) and not _is_member(I, members, row):
-                neighbors[count, 0], neighbors[count, 1] = objects[row, OX], objects[row, OY]
-                neighbors[count, 2], neighbors[count, 3] = objects[row, OVX], objects[row, OVY]
-                neighbors[count, 4] = objects[row, OR]
-                count += 1
+            if not inside[row] and sees(I, objects, m, row):
+                count = _add_neighbor(objects, row, neighbors, count)
         F[m, PLAN0], F[m, PLAN1] = _sfm(F, I, params, goals, objects, segments, m, neighbors, count, dt)
 
 
 @register_jitable
-def _is_member(I, members, row):  # noqa: E741
-    for m in members:
-        if I[m, ROW] == row:
-            return True
-    return False
+def _add_neighbor(objects, row, neighbors, count) -> int:
+    neighbors[count, 0], neighbors[count, 1] = objects[row, OX], objects[row, OY]
+    neighbors[count, 2], neighbors[count, 3] = objects[row, OVX], objects[row, OVY]
+    neighbors[count, 4] = objects[row, OR]
+    return count + 1
 
 
 @register_jitable
-def prepare(F, I, goals, routes, objects, m, rng) -> bool:  # noqa: E741
+def prepare(F, I, goals, routes, objects, m) -> bool:  # noqa: E741
     """Start mover ``m``'s step: a stopped mover halts (False); an arrived one takes its next goal
-    (a wanderer draws it from ``rng``, a loop starts over)."""
+    (a loop starts over; a wanderer's was drawn before the step, by :func:`draw_wanderers`)."""
     if I[m, STOPPED] == 1:
         F[m, V0] = F[m, V1] = 0.0
         row = I[m, ROW]
         objects[row, OVX] = objects[row, OVY] = 0.0
         return False
-    if I[m, WANDER] == 1 and I[m, ARRIVED] == 1:
-        # IR-SIM draws x, y and a heading it never uses.
-        x = F[m, WANDER_X0] + (F[m, WANDER_X1] - F[m, WANDER_X0]) * rng.random()
-        y = F[m, WANDER_Y0] + (F[m, WANDER_Y1] - F[m, WANDER_Y0]) * rng.random()
-        rng.random()
-        goals[m, 0, 0], goals[m, 0, 1] = x, y
-        I[m, HEAD], I[m, TAIL], I[m, ARRIVED] = 0, 1, 0
     if I[m, LOOP] == 1 and I[m, ARRIVED] == 1:
         length = I[m, ROUTE_LENGTH]
         if length > 1:
@@ -218,6 +213,19 @@ def prepare(F, I, goals, routes, objects, m, rng) -> bool:  # noqa: E741
             length = 2
         I[m, HEAD], I[m, TAIL], I[m, ARRIVED] = 0, length, 0
     return I[m, DRIVEN] == 0
+
+
+def draw_wanderers(F: np.ndarray, I: np.ndarray, goals: np.ndarray, rng: np.random.Generator) -> None:  # noqa: E741
+    """Give every wanderer that arrived last step (and is not halted) its next goal, in mover
+    order: x, y and a heading IR-SIM draws and never uses, as IR-SIM's ``random_point_range``.
+    The step draws nothing else, so drawing them all first keeps IR-SIM's order; and a Generator
+    passed into a compiled step would cost more than the step."""
+    for m in np.flatnonzero((I[:, WANDER] == 1) & (I[:, ARRIVED] == 1) & (I[:, STOPPED] == 0)):
+        x = F[m, WANDER_X0] + (F[m, WANDER_X1] - F[m, WANDER_X0]) * rng.random()
+        y = F[m, WANDER_Y0] + (F[m, WANDER_Y1] - F[m, WANDER_Y0]) * rng.random()
+        rng.random()
+        goals[m, 0, 0], goals[m, 0, 1] = x, y
+        I[m, HEAD], I[m, TAIL], I[m, ARRIVED] = 0, 1, 0
 
 
 @register_jitable
@@ -264,11 +272,11 @@ def move(F, I, objects, outlines, irsim, m, c0, c1, dt) -> None:  # noqa: E741
     objects[row, OVX], objects[row, OVY] = world_velocity(I[m, KINEMATICS], theta, c0, c1)
 
 
-@kernel
-def advance(F, I, params, goals, routes, objects, segments, outlines, irsim, dt, rng, neighbors) -> None:  # noqa: E741
-    """Every mover's step in order (none of them uses ``rvo``)."""
+@register_jitable
+def advance(F, I, params, goals, routes, objects, segments, outlines, irsim, dt, neighbors) -> None:  # noqa: E741
+    """Every mover's step in order (none of them uses ``rvo``; the wanderers have drawn)."""
     for m in range(F.shape[0]):
-        if prepare(F, I, goals, routes, objects, m, rng):
+        if prepare(F, I, goals, routes, objects, m):
             c0, c1 = command(F, I, params, goals, objects, segments, m, dt, neighbors)
             move(F, I, objects, outlines, irsim, m, c0, c1, dt)
 
@@ -337,7 +345,7 @@ def _touch(F, I, a, b) -> bool:  # noqa: E741
                         I[b, SHAPE], F[b, X], F[b, Y], F[b, THETA], F[b, RADIUS], F[b, LENGTH], F[b, WIDTH])
 
 
-@kernel
+@register_jitable
 def settle(F, I, goals, robot, mode, circles, boxes, segments, rings, ring_index) -> int:  # noqa: E741
     """Judge every mover after the step: arrival at its goal (the queue moves on, or it has
     arrived), contact with the static geometry, the robot (``robot``: shape, x, y, heading,
@@ -375,3 +383,66 @@ def settle(F, I, goals, robot, mode, circles, boxes, segments, rings, ring_index
                 colliding = _touch(F, I, m, other)
         I[m, STOPPED] = int(colliding)
     return touched
+
+
+@kernel
+def snapshot(F, I, objects, moving, circles, boxes, states, circle_rows, box_rows) -> None:  # noqa: E741
+    """Write the movers' states (rows as :class:`~common.motion.movers.MoverStates` has them) and
+    what a lidar sees of them: circles (x, y, r) and boxes (x, y, cos, sin, half length, half
+    width). ``moving``, ``circles`` and ``boxes``: the table rows of the movers, of those a lidar sees
+    as circles, and as boxes."""
+    for k in range(moving.shape[0]):
+        m = moving[k]
+        row = I[m, ROW]
+        box = I[m, SHAPE] == BOX
+        states[k, 0], states[k, 1], states[k, 2] = F[m, X], F[m, Y], F[m, THETA]
+        states[k, 3], states[k, 4], states[k, 5] = objects[row, OVX], objects[row, OVY], F[m, RADIUS]
+        states[k, 6], states[k, 7] = (F[m, LENGTH], F[m, WIDTH]) if box else (0.0, 0.0)
+    for k in range(circles.shape[0]):
+        m = circles[k]
+        circle_rows[k, 0], circle_rows[k, 1], circle_rows[k, 2] = F[m, X], F[m, Y], F[m, RADIUS]
+    for k in range(boxes.shape[0]):
+        m = boxes[k]
+        box_rows[k, 0], box_rows[k, 1] = F[m, X], F[m, Y]
+        box_rows[k, 2], box_rows[k, 3] = math.cos(F[m, THETA]), math.sin(F[m, THETA])
+        box_rows[k, 4], box_rows[k, 5] = 0.5 * F[m, LENGTH], 0.5 * F[m, WIDTH]
+
+
+@register_jitable
+def sync_robot(F, I, objects, outline, irsim, robot, x, y, yaw, v, w, stopped) -> None:  # noqa: E741
+    """Where the controlled robot is and the command it moves with: its disc (row 0 of
+    ``objects``), its body for contacts (``robot``) and its own row if it has one (the first)."""
+    place_disc(objects, outline, irsim, 0, outline.shape[0], x, y, yaw)
+    objects[0, OVX], objects[0, OVY] = v * math.cos(yaw), v * math.sin(yaw)
+    robot[1], robot[2], robot[3] = x, y, yaw
+    if F.shape[0] > 0 and I[0, DRIVEN] == 1:
+        F[0, X], F[0, Y], F[0, THETA], F[0, V0], F[0, V1] = x, y, yaw, v, w
+        I[0, STOPPED] = 1 if stopped else 0
+
+
+@kernel
+def begin_step(F, I, params, goals, objects, segments, orca_velocity, members, inside, dt, neighbors,  # noqa: E741
+               outline, irsim, robot, x, y, yaw, v, w, stopped) -> None:
+    """The step before the robot moves: where the robot is, then the groups' plans."""
+    sync_robot(F, I, objects, outline, irsim, robot, x, y, yaw, v, w, stopped)
+    if members.shape[0] > 0:
+        plan_groups(F, I, params, goals, objects, segments, orca_velocity, members, inside, dt, neighbors)
+
+
+@kernel
+def finish_step(F, I, params, goals, routes, objects, segments, outlines, irsim, dt, neighbors, outline,  # noqa: E741
+                robot, x, y, yaw, v, w, stopped, advanced, mode, circles, boxes, walls, rings, ring_index, moving,
+                seen_circles, seen_boxes, states, circle_rows, box_rows) -> tuple[int, bool]:
+    """The step after the robot moved: where it is now, every mover's step (unless ``advanced``
+    already, by the caller), the judgement (:func:`settle`) and the movers' states and lidar rows
+    (:func:`snapshot`). The first mover (table row) the robot touches, or -1; and whether a
+    wanderer arrived (the next step must draw its goal first)."""
+    sync_robot(F, I, objects, outline, irsim, robot, x, y, yaw, v, w, stopped)
+    if not advanced:
+        advance(F, I, params, goals, routes, objects, segments, outlines, irsim, dt, neighbors)
+    touched = settle(F, I, goals, robot, mode, circles, boxes, walls, rings, ring_index)
+    snapshot(F, I, objects, moving, seen_circles, seen_boxes, states, circle_rows, box_rows)
+    wanders = False
+    for m in range(F.shape[0]):
+        wanders = wanders or (I[m, WANDER] == 1 and I[m, ARRIVED] == 1 and I[m, STOPPED] == 0)
+    return touched, wanders

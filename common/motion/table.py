@@ -28,7 +28,7 @@ from common.irsim_geometry import CIRCLE_VERTICES, bounding_radius, circle_disc,
     rectangle_outline
 from common.kernel_cache import kernel
 from common.motion.sfm import PARAMETERS as SFM_PARAMETERS
-from common.motion.spec import Motion, Orca, Rvo, Sfm
+from common.motion.spec import Dash, Motion, Orca, Rvo, Sfm
 from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, SegmentObstacle
 
 # Float columns of F.
@@ -111,19 +111,20 @@ def as_disc(obstacle) -> tuple[float, float, float]:
     return cx, cy, enclosing_radius(ring)
 
 
-def _behavior_row(motion: Motion, step_time: float) -> np.ndarray:
-    row = np.zeros(PARAMS)
+def _behavior_row(motion: Motion, step_time: float) -> list[float]:
+    """The behaviour's parameters as a row of ``params``."""
     behavior = motion.behavior
     if isinstance(behavior, Sfm):
-        values = {**behavior.model_dump(), "step_time": step_time}
-        row[:len(SFM_PARAMETERS)] = [values[name] for name in SFM_PARAMETERS]
+        row = [behavior.vmax, step_time, *(getattr(behavior, name) for name in SFM_PARAMETERS[2:])]
     elif isinstance(behavior, Orca):
         realizable = motion.vel_max[0] if motion.kinematics == "diff" else min(motion.vel_max)
         speed = realizable if behavior.max_speed is None else min(behavior.max_speed, realizable)
-        row[:5] = (behavior.neighbor_dist, behavior.max_neighbors, behavior.time_horizon, behavior.safe_radius, speed)
+        row = [behavior.neighbor_dist, behavior.max_neighbors, behavior.time_horizon, behavior.safe_radius, speed]
     elif isinstance(behavior, Rvo):
-        row[:5] = [getattr(behavior, name) for name in RVO_PARAMETERS]
-    return row
+        row = [getattr(behavior, name) for name in RVO_PARAMETERS]
+    else:
+        row = []
+    return row + [0.0] * (PARAMS - len(row))
 
 
 @dataclass
@@ -153,57 +154,47 @@ def _route(motion: Motion, start: tuple[float, float]) -> list[tuple[float, floa
     return goals
 
 
+_BEHAVIORS = {"dash": DASH, "rvo": RVO, "orca": ORCA, "sfm": SFM}
+_TARGETS = {"all": ALL, "robot": ROBOTS, "obstacle": OBSTACLES}
+
+
 def mover_table(scenario: Scenario) -> MoverTable:
     """The arrays of ``scenario``'s movers (the controlled robot too, if it carries a motion)."""
     entries: list[tuple[int, object, Motion]] = []
     if scenario.robot_motion is not None:
         entries.append((-1, None, scenario.robot_motion))
-    entries += [(i, o, o.motion) for i, o in enumerate(scenario.obstacles) if getattr(o, "motion", None) is not None]
+    entries += [(i, o, o.motion) for i, o in enumerate(scenario.obstacles)
+                if type(o) in (CircleObstacle, BoxObstacle) and o.motion is not None]
     irsim = scenario.kind == "irsim"
     n = len(entries)
     routes = [_route(motion, _position(scenario, obstacle)) for _, obstacle, motion in entries]
     capacity = max([2] + [len(r) + 1 for r in routes])
     floats, ints, params = [], [], []
     goals, route_table = np.zeros((n, capacity, 2)), np.zeros((n, capacity, 2))
-    outlines = np.zeros((n, CIRCLE_VERTICES + 1, 2))
+    outlines = np.zeros((n if irsim else 0, CIRCLE_VERTICES + 1, 2))
     groups: dict[str, int] = {}
     step_time = scenario.world.step_time
     for m, ((index, obstacle, motion), route) in enumerate(zip(entries, routes)):
         x, y = _position(scenario, obstacle)
         theta = scenario.start[2] if obstacle is None else obstacle.yaw
         body = scenario.robot if obstacle is None else obstacle
-        box = getattr(body, "shape", "circle") == "box" or isinstance(body, BoxObstacle)
+        box = isinstance(body, BoxObstacle) or (obstacle is None and body.shape == "box")
         radius = 0.5 * math.hypot(body.length, body.width) if box else body.radius
         size = len(_outline(outlines[m], box, body)) if irsim else 0
         seen = _irsim_radius(outlines[m, :size]) if irsim else radius
-        wander = motion.wander or (0.0, 0.0, 0.0, 0.0)
-        row = [0.0] * FLOATS
-        row[X], row[Y], row[THETA], row[START_X], row[START_Y], row[INIT_THETA] = x, y, theta, x, y, theta
-        row[V0], row[V1], row[INIT_V0], row[INIT_V1] = (*motion.velocity, *motion.velocity)
-        (row[VMIN0], row[VMIN1]), (row[VMAX0], row[VMAX1]), (row[ACC0], row[ACC1]) = motion.lower, motion.vel_max, motion.acce
-        row[RADIUS], row[SEEN_RADIUS] = radius, seen
-        row[LENGTH], row[WIDTH] = (body.length, body.width) if box else (0.0, 0.0)
-        row[GOAL_THRESHOLD] = motion.goal_threshold
-        row[ANGLE_TOLERANCE] = getattr(motion.behavior, "angle_tolerance", 0.1)
-        row[WANDER_X0], row[WANDER_Y0], row[WANDER_X1], row[WANDER_Y1] = wander
-        floats.append(row)
-        flags = [0] * INTS
-        flags[KINEMATICS] = DIFF if motion.kinematics == "diff" else OMNI
-        flags[BEHAVIOR] = ("dash", "rvo", "orca", "sfm").index(motion.behavior.name)
-        flags[SHAPE] = BOX if box else CIRCLE
-        flags[GROUP] = -1 if motion.group is None else groups.setdefault(motion.group, len(groups))
-        flags[ROLE] = ROBOT if motion.role == "robot" else OBSTACLE
-        flags[UNOBSTRUCTED] = 0 if obstacle is None else int(obstacle.unobstructed)
-        flags[REACTS] = int(motion.reacts_to_robot)
-        flags[TARGET] = ("all", "robot", "obstacle").index(motion.target_roles)
-        flags[LOOP] = int(motion.route != "once" and motion.wander is None)
-        flags[WANDER] = int(motion.wander is not None)
-        flags[ROW] = index + 1
-        flags[DRIVEN] = int(obstacle is None)
-        flags[RVO_MODE] = RVO_MODES.index(motion.behavior.mode) if isinstance(motion.behavior, Rvo) else 0
-        flags[ROUTE_LENGTH] = len(route)
-        flags[OUTLINE] = size
-        ints.append(flags)
+        behavior = motion.behavior
+        v0, v1 = motion.velocity
+        floats.append([x, y, theta, v0, v1, *motion.lower, *motion.vel_max, *motion.acce, radius,
+                       *((body.length, body.width) if box else (0.0, 0.0)), motion.goal_threshold,
+                       behavior.angle_tolerance if isinstance(behavior, Dash) else 0.1,
+                       *(motion.wander or (0.0, 0.0, 0.0, 0.0)), x, y, theta, v0, v1, 0.0, 0.0, seen])
+        ints.append([DIFF if motion.kinematics == "diff" else OMNI, _BEHAVIORS[behavior.name], BOX if box else CIRCLE,
+                     -1 if motion.group is None else groups.setdefault(motion.group, len(groups)),
+                     ROBOT if motion.role == "robot" else OBSTACLE, 0 if obstacle is None else int(obstacle.unobstructed),
+                     int(motion.reacts_to_robot), _TARGETS[motion.target_roles],
+                     int(motion.route != "once" and motion.wander is None), int(motion.wander is not None), 0, 0, 0, 0,
+                     len(route), index + 1, 0, int(obstacle is None),
+                     RVO_MODES.index(behavior.mode) if isinstance(behavior, Rvo) else 0, size])
         route_table[m, :len(route)] = route
         params.append(_behavior_row(motion, step_time))
     objects, segments = _objects(scenario, irsim)
