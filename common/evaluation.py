@@ -2,9 +2,14 @@
 
 Per episode: outcome (success, collision, timeout, stuck: decided by :class:`common.task.Task`, as
 the env decides it), steps, path length, wall time and SPL (Anderson et al. 2018: success x
-shortest / max(shortest, taken)); the shortest path is A* on the scenario's ground-truth grid, less
-the goal radius, since an episode ends on entering it. Aggregates carry mean ± std and 95% Wilson
-intervals for the rates.
+shortest / max(shortest, taken)); the shortest path is A* on the scenario's ground-truth grid (its
+static obstacles), less the goal radius, since an episode ends on entering it. Aggregates carry
+mean ± std and 95% Wilson intervals for the rates.
+
+Among movers, the social figures crowd-navigation papers report (CrowdNav, robot_sf): the
+smallest gap between the robot's footprint and a person's body over the episode, the seconds
+spent within :data:`PERSONAL_SPACE` of one, and a collision's kind (``static`` or ``mover``) and
+who moved into whom (``robot`` or ``mover``: who closed in faster; see :class:`common.readings.Contact`).
 """
 
 from __future__ import annotations
@@ -18,10 +23,14 @@ import numpy as np
 from scipy import stats
 
 from common.conditions import Conditions
+from common.geometry import box_distance
 from common.readings import Readings
 from common.scenario import LidarSpec, RobotProfile, Scenario
 from common.task import DEFAULT_MAX_STEPS, OUTCOMES, Task
 from common.tiers import make_world
+
+
+PERSONAL_SPACE = 0.5  # m between the robot's footprint and a person's body
 
 
 class Agent(Protocol):
@@ -53,6 +62,44 @@ class Episode:
     shortest_path: float
     spl: float
     wall_time: float
+    min_person_gap: float | None = None  # m; None: no person in the world
+    time_near_people: float = 0.0  # s within PERSONAL_SPACE of a person
+    collision_with: str | None = None  # "static" or "mover"
+    collision_by: str | None = None  # "robot" or "mover": who moved into whom
+
+
+class SocialRecord:
+    """The social figures of one episode, fed every readings (see the module)."""
+
+    def __init__(self, robot: RobotProfile) -> None:
+        self.robot = robot
+        self.min_gap: float | None = None
+        self.time_near = 0.0
+        self._time = 0.0
+        self.contact = None
+
+    def __call__(self, readings: Readings) -> None:
+        dt, self._time = readings.time - self._time, readings.time
+        if readings.contact is not None:
+            self.contact = readings.contact
+        movers = readings.movers
+        if movers is None:
+            return
+        people = [k for k, label in enumerate(movers.labels) if label == "person"]
+        if not people:
+            return
+        rows = movers.rows[people]
+        x, y, yaw = readings.pose
+        if self.robot.shape == "circle":
+            gaps = np.hypot(rows[:, 0] - x, rows[:, 1] - y) - self.robot.radius - rows[:, 5]
+        else:
+            c, s = math.cos(yaw), math.sin(yaw)
+            gaps = np.array([box_distance(px, py, x, y, self.robot.length, self.robot.width, c, s) - r
+                             for px, py, r in rows[:, [0, 1, 5]]])
+        nearest = float(gaps.min())
+        self.min_gap = nearest if self.min_gap is None else min(self.min_gap, nearest)
+        if nearest < PERSONAL_SPACE:
+            self.time_near += dt
 
 
 def shortest_path_length(scenario: Scenario, goal_radius: float | None = None, resolution: float = 0.1) -> float:
@@ -95,6 +142,8 @@ def run_episode(
     task.start(scenario, readings)
     agent.bind(scenario.robot, scenario.lidar, task.radius)
     agent.reset()
+    social = SocialRecord(scenario.robot)
+    social(readings)
     if on_step:
         on_step(readings)
     outcome = None
@@ -102,6 +151,7 @@ def run_episode(
     while outcome is None:
         v, w = agent.act(readings, scenario.goal)
         readings = world.step(v, w)
+        social(readings)
         if on_step:
             on_step(readings)
         outcome = task.step(readings)
@@ -109,7 +159,9 @@ def run_episode(
     shortest = shortest_path_length(scenario, task.radius) if shortest is None else shortest
     travelled = task.travelled
     spl = shortest / max(shortest, travelled) if outcome == "success" and shortest > 0 else float(outcome == "success")
-    return Episode(agent.name, scenario.name, seed, outcome, task.steps, travelled, shortest, spl, wall)
+    crash = social.contact if outcome == "collision" else None
+    return Episode(agent.name, scenario.name, seed, outcome, task.steps, travelled, shortest, spl, wall,
+                   social.min_gap, round(social.time_near, 6), crash.kind if crash else None, crash.by if crash else None)
 
 
 def wilson_interval(successes: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
@@ -142,14 +194,38 @@ class Summary:
     std_path_length: float | None
     mean_wall_time: float
     rows: list[Episode] = field(default_factory=list, repr=False)
+    social: dict | None = None  # the social figures, where the world has movers (see social_figures)
 
     def to_json(self) -> dict:
-        """The agreed JSON object (plus stuck rate and the interval)."""
+        """The agreed JSON object (plus stuck rate and the interval; and the social figures, among movers)."""
         keys = ("success_rate", "collision_rate", "timeout_rate", "stuck_rate", "spl", "mean_steps",
                 "mean_path_length", "episodes", "success_ci95")
         out = {key: getattr(self, key) for key in keys}
         out["success_ci95"] = list(self.success_ci95)
+        if self.social is not None:
+            out["social"] = self.social
         return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in out.items()}
+
+
+def social_figures(episodes: Sequence[Episode]) -> dict | None:
+    """Collisions by kind (static, mover) and by who moved into whom, as shares of all episodes;
+    the mean and the smallest of the episodes' closest gaps to a person, and the mean seconds spent
+    within PERSONAL_SPACE of one; None if no episode met a person or a mover."""
+    crashes = [e for e in episodes if e.collision_with is not None]
+    gaps = [e.min_person_gap for e in episodes if e.min_person_gap is not None]
+    if not gaps and not any(e.collision_with == "mover" for e in crashes) and not any(
+            e.time_near_people for e in episodes):
+        return None
+    n = len(episodes)
+    return {
+        "collision_static_rate": sum(e.collision_with == "static" for e in crashes) / n,
+        "collision_mover_rate": sum(e.collision_with == "mover" for e in crashes) / n,
+        "collision_robot_into_mover_rate": sum(e.collision_with == "mover" and e.collision_by == "robot" for e in crashes) / n,
+        "collision_mover_into_robot_rate": sum(e.collision_with == "mover" and e.collision_by == "mover" for e in crashes) / n,
+        "mean_min_person_gap": float(np.mean(gaps)) if gaps else None,
+        "min_person_gap": float(np.min(gaps)) if gaps else None,
+        "mean_time_near_people": float(np.mean([e.time_near_people for e in episodes])),
+    }
 
 
 def _mean_std(values: Sequence[float]) -> tuple[float | None, float | None]:
@@ -174,6 +250,7 @@ def summarise(agent: str, episodes: Sequence[Episode]) -> Summary:
         spl=float(np.mean(spl)), spl_std=float(np.std(spl)),
         mean_steps=steps[0], std_steps=steps[1], mean_path_length=length[0], std_path_length=length[1],
         mean_wall_time=float(np.mean([e.wall_time for e in episodes])), rows=list(episodes),
+        social=social_figures(episodes),
     )
 
 

@@ -108,6 +108,7 @@ class NavigationEnv(gym.Env):
         self._readings = self.world.reset(seed=int(self.np_random.integers(2**31 - 1)))
         self.task.start(scenario, self._readings, self.np_random)
         self.reward.reset()
+        self.layout.reset()
         self.trajectory = [tuple(self._readings.pose[:2])]
         if self.render_mode == "human":
             self.render()

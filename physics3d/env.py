@@ -26,6 +26,9 @@ class CameraLayout:
             "depth": spaces.Box(0.0, far, (height, width, 1), np.float32),  # channel-last, as image spaces are
         })
 
+    def reset(self) -> None:
+        self.state.reset()
+
     def __call__(self, readings: Readings, goal: tuple[float, float]) -> dict[str, np.ndarray]:
         camera = readings.camera
         return {"state": self.state(readings, goal), "rgb": camera["rgb"], "depth": camera["depth"][..., np.newaxis]}

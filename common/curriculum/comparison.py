@@ -20,20 +20,37 @@ def _pm(mean: float | None, std: float | None, digits: int = 1) -> str:
 
 
 def markdown_table(summaries: Sequence[Summary], title: str | None = None) -> str:
-    """One row per agent: rates (success with its 95% interval), SPL, steps and path length."""
+    """One row per agent: rates (success with its 95% interval), SPL, steps and path length; among
+    movers also the social figures (collisions with movers, and who moved into whom; the closest
+    gap to a person, mean and least; seconds within 0.5 m of one)."""
+    social = any(s.social is not None for s in summaries)
     lines = [f"### {title}", ""] if title else []
     lines += [
-        "| agent | episodes | success (95% CI) | collision | timeout | stuck | SPL | steps (successes) | path m (successes) |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| agent | episodes | success (95% CI) | collision | timeout | stuck | SPL | steps (successes) | path m (successes) |"
+        + (" mover collisions (robot into / into robot) | closest to a person m (mean, least) | s within 0.5 m |"
+           if social else ""),
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|" + ("---:|---:|---:|" if social else ""),
     ]
     for s in summaries:
         lo, hi = s.success_ci95
-        lines.append(
+        line = (
             f"| {s.agent} | {s.episodes} | {s.success_rate:.0%} ({lo:.0%}–{hi:.0%}) | {s.collision_rate:.0%} | "
             f"{s.timeout_rate:.0%} | {s.stuck_rate:.0%} | {s.spl:.2f} | {_pm(s.mean_steps, s.std_steps, 0)} | "
             f"{_pm(s.mean_path_length, s.std_path_length, 2)} |"
         )
+        if social:
+            line += _social_cells(s.social)
+        lines.append(line)
     return "\n".join(lines) + "\n"
+
+
+def _social_cells(figures: dict | None) -> str:
+    if figures is None:
+        return " – | – | – |"
+    gap = ("–" if figures["mean_min_person_gap"] is None
+           else f"{figures['mean_min_person_gap']:.2f}, {figures['min_person_gap']:.2f}")
+    return (f" {figures['collision_mover_rate']:.0%} ({figures['collision_robot_into_mover_rate']:.0%} / "
+            f"{figures['collision_mover_into_robot_rate']:.0%}) | {gap} | {figures['mean_time_near_people']:.1f} |")
 
 
 def write_csv(summaries: Sequence[Summary], path: str | Path) -> Path:

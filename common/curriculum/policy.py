@@ -167,7 +167,7 @@ class PolicyAgent:
         self.mapping = ActionMapping(robot, self.action_mapping)
 
     def reset(self) -> None:
-        pass
+        self.layout.reset()  # a layout with memory (lidar79_motion) starts the episode afresh
 
     def observe(self, readings: Readings, goal: tuple[float, float]) -> np.ndarray:
         obs = self.layout(readings, goal)
