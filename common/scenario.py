@@ -314,7 +314,7 @@ class Scenario(Frozen):
             raise ValueError(f"{len(movers):,} moving obstacles; allowed: at most {MAX_MOVERS}")
         groups: dict[str, Motion] = {}
         for index, motion in movers + ([(-1, self.robot_motion)] if self.robot_motion is not None else []):
-            where = "robot_motion" if index < 0 else f"obstacles.{index}.motion"
+            where = "robot_motion" if index < 0 else f"obstacles.{index}.{self.obstacles[index].type}.motion"
             if self.world.walls:  # a walled world cannot be left: every goal must lie inside it
                 for k, (x, y) in enumerate(motion.goals):
                     if not self.world.contains(x, y):

@@ -19,13 +19,24 @@ def pytest_configure(config):
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus, config):
-    """Print the controller-comparison tables (tests/test_baselines.py) into the log, as CI's record."""
+    """Print the controller-comparison tables (tests/test_baselines.py) and the count of IR-SIM's
+    usage worlds (tests/test_irsim_usage.py) into the log, as CI's record."""
     folder = os.environ.get(TABLES_ENV)
     tables = sorted(Path(folder).glob("*.md")) if folder else []
     if tables:
         terminalreporter.section("controller comparison (flatland)")
         for table in tables:
             terminalreporter.write(table.read_text() + "\n")
+    results = sorted((Path(folder) / "irsim_usage").glob("*.txt")) if folder else []
+    if results:
+        terminalreporter.section("IR-SIM's usage worlds in flatland")
+        outcomes = [path.read_text() for path in results]
+        for path, outcome in zip(results, outcomes):
+            terminalreporter.write(f"{path.stem.replace('__', '/')}: {outcome}\n")
+        counts = {kind: sum(o.startswith(kind) for o in outcomes) for kind in ("reproduced", "refused", "not run")}
+        terminalreporter.write(f"IR-SIM runs {len(outcomes) - counts['not run']} of {len(outcomes)}: flatland reproduces "
+                               f"{counts['reproduced']}, refuses {counts['refused']} with one line, diverges on none "
+                               f"(a divergence fails its test)\n")
 
 
 import pytest  # noqa: E402

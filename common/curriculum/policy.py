@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+import torch
+
 from common.actions import ACTION_SPACE, ActionMapping
 from common.curriculum.policy_file import MANIFEST, Manifest, Normalizer, PolicyFile
 from common.errors import ConfigError, quote
@@ -216,6 +218,8 @@ def load_weights(model, path: str | Path, policy_only: bool) -> PolicyFile | Non
         target = _attribute(model, name)
         state = file.tensors(f"{name}.pth", model.device)
         if name == POLICY_WEIGHTS:
+            if policy_only and file.manifest is not None:
+                state = widened(state, file, int(model.observation_space.shape[0]))
             _load_module(target, state, file, name, what)
         else:
             try:
@@ -237,6 +241,35 @@ def load_weights(model, path: str | Path, policy_only: bool) -> PolicyFile | Non
     model.num_timesteps = file.manifest.timesteps
     model._n_updates = file.manifest.n_updates
     return file
+
+
+# A layout that extends another (the same entries first, more after it): a policy trained on the
+# shorter one starts a stage on the longer one, reading the new entries with zero weights.
+EXTENDS = {"lidar79_motion": "lidar43_log"}
+
+
+def widened(state: dict, file: PolicyFile, size: int) -> dict:
+    """A policy's weights for an observation of ``size`` entries, if its own layout is one the
+    stage's extends (``EXTENDS``): every first layer gets zero weights for the new entries, placed
+    after the old ones and before anything a layer reads after the observation (a critic's action),
+    so the policy acts and values as before until training finds a use for them. Otherwise the
+    weights as they are (and a misfit is refused where they are loaded)."""
+    old = int(observation_space(file.manifest).shape[0])
+    if old == size or file.manifest.observation not in EXTENDS.values() or file.normalizer(old) is not None:
+        return state
+    grown = {}
+    for key, tensor in state.items():
+        if tensor.dim() == 2 and tensor.shape[1] in (old, old + ACTION_SPACE.shape[0]) and _reads_observation(key):
+            zeros = tensor.new_zeros((tensor.shape[0], size - old))
+            tensor = torch.cat([tensor[:, :old], zeros, tensor[:, old:]], dim=1)
+        grown[key] = tensor
+    return grown
+
+
+def _reads_observation(key: str) -> bool:
+    """Whether a weight is a first layer's: the one that reads the observation (SB3's names)."""
+    return key.endswith(".0.weight") and any(part in key for part in ("latent_pi", "latent_vf", "qf", "mu", "policy_net",
+                                                                       "value_net", "actor", "critic"))
 
 
 def _optimizer_state_fits(optimizer) -> bool:

@@ -5,8 +5,10 @@ relaxation toward the desired velocity (``vmax`` along its desire), an anisotrop
 each neighbour within ``neighbor_threshold`` (the interaction vector t = lambda (v - v_other) + d,
 its range B = gamma |t|, a decay along t and a sideways push by the angle between t and d), and an
 exponential push from every line obstacle within 5 sigma of the body, clamped at its surface. The
-result is capped at ``vmax``. The arithmetic follows IR-SIM's per-agent model term by term, so a
-crowd moves as IR-SIM moves it; IR-SIM's social groups (Moussaïd 2010) are not modelled.
+result is capped at ``vmax``. The arithmetic follows IR-SIM's per-agent model term by term, bit
+for bit, and its batched group model to the last bits (NumPy's vector arithmetic rounds a few
+steps differently), so a crowd moves as IR-SIM moves it; IR-SIM's social groups (Moussaïd 2010)
+are not modelled.
 """
 
 from __future__ import annotations
@@ -15,6 +17,8 @@ import math
 
 import numpy as np
 from numba.extending import register_jitable
+
+from common.motion.steering import c_pow
 
 # The parameter vector :func:`social_force_velocity` reads, by index (names as IR-SIM's).
 VMAX, STEP_TIME, NEIGHBOR_THRESHOLD, RELAXATION_TIME, FORCE_DESIRED, FORCE_SOCIAL, FORCE_OBSTACLE, SIGMA_OBSTACLE, \
@@ -31,7 +35,8 @@ def _social_force(x: float, y: float, vx: float, vy: float, neighbors: np.ndarra
     reach = p[NEIGHBOR_THRESHOLD]
     for k in range(count):
         dx, dy = neighbors[k, 0] - x, neighbors[k, 1] - y
-        if dx * dx + dy * dy >= reach * reach:
+        # IR-SIM's squares are the C library's pow, which differs from dx * dx in the last bit at times.
+        if not c_pow(x - neighbors[k, 0], 2.0) + c_pow(y - neighbors[k, 1], 2.0) < c_pow(reach, 2.0):
             continue
         dist = math.sqrt(dx * dx + dy * dy)
         if dist < 1e-6 or dist > reach:
@@ -48,9 +53,9 @@ def _social_force(x: float, y: float, vx: float, vy: float, neighbors: np.ndarra
         gap = max(dist - 2.0 * p[SAFETY_RADIUS], 0.0)
         slow = p[N_VELOCITY] * b * theta
         side = p[N_ANGULAR] * b * theta
-        f_v = -math.exp(-gap / b - slow * slow)
+        f_v = -math.exp(-gap / b - c_pow(slow, 2.0))
         sign = 1.0 if theta > 0 else (-1.0 if theta < 0 else 0.0)
-        f_a = -sign * math.exp(-gap / b - side * side)
+        f_a = -sign * math.exp(-gap / b - c_pow(side, 2.0))
         fx += f_v * t_hat_x + f_a * -t_hat_y
         fy += f_v * t_hat_y + f_a * t_hat_x
     return fx, fy
@@ -84,17 +89,27 @@ def _obstacle_force(x: float, y: float, radius: float, segments: np.ndarray, p: 
 
 
 @register_jitable
+def desire(desired_x: float, desired_y: float, vmax: float, group: bool) -> tuple[float, float]:
+    """The desired velocity at ``vmax`` along the desire (IR-SIM renormalises the goal-seeking
+    velocity it is given): a group's norm is NumPy's hypot, an agent's own ``(...) ** 0.5``."""
+    if group:
+        norm = math.hypot(desired_x, desired_y)
+    else:
+        norm = c_pow(desired_x * desired_x + desired_y * desired_y, 0.5)
+    if norm > 1e-9:
+        return vmax * desired_x / norm, vmax * desired_y / norm
+    return desired_x, desired_y
+
+
+@register_jitable
 def social_force_velocity(x: float, y: float, vx: float, vy: float, radius: float, desired_x: float,
                           desired_y: float, neighbors: np.ndarray, count: int, segments: np.ndarray,
                           p: np.ndarray) -> tuple[float, float]:
-    """The next world-frame velocity of an agent at (x, y) moving at (vx, vy), whose desire points
-    along (desired_x, desired_y), among the first ``count`` rows of ``neighbors`` (x, y, vx, vy,
-    radius) and the line obstacles ``segments`` (x1, y1, x2, y2), with the parameters ``p``
-    (indexed by this module's constants)."""
+    """The next world-frame velocity of an agent at (x, y) moving at (vx, vy) that desires to move
+    at (desired_x, desired_y) (:func:`desire`), among the first ``count`` rows of ``neighbors``
+    (x, y, vx, vy, radius) and the line obstacles ``segments`` (x1, y1, x2, y2), with the
+    parameters ``p`` (indexed by this module's constants)."""
     vmax = p[VMAX]
-    norm = math.sqrt(desired_x * desired_x + desired_y * desired_y)
-    if norm > 1e-9:
-        desired_x, desired_y = vmax * desired_x / norm, vmax * desired_y / norm
     tau = p[RELAXATION_TIME]
     social_x, social_y = _social_force(x, y, vx, vy, neighbors, count, p)
     obstacle_x, obstacle_y = _obstacle_force(x, y, radius, segments, p)

@@ -24,12 +24,12 @@ from common.irsim_geometry import centroid, transformed
 from common.kernel_cache import kernel
 from common.kinematics import unicycle_euler
 from common.motion.orca import orca_velocities
-from common.motion.sfm import social_force_velocity
+from common.motion.sfm import VMAX, desire, social_force_velocity
 from common.motion.steering import (
     desired_omni_velocity, diff_dash, omni_dash, omni_to_world, world_to_diff, world_to_omni, wrap_to_pi,
 )
 from common.motion.table import (
-    ACC0, ACC1, ANGLE_TOLERANCE, ARRIVED, BEHAVIOR, BOX, DIFF, DRIVEN, EXTEND, GOAL_THRESHOLD, HEAD, KINEMATICS, LENGTH,
+    ACC0, ACC1, ANGLE_TOLERANCE, ARRIVED, BEHAVIOR, BOX, DIFF, DRIVEN, EXTEND, GOAL_THRESHOLD, GROUP, HEAD, KINEMATICS, LENGTH,
     LOOP, OBSTACLE, OBSTACLES, OR, ORCA, OROLE, OUTLINE, OVX, OVY, OX, OY, PLAN0, PLAN1, PLANNED, RADIUS, REACTS, ROBOT,
     ROBOTS, ROLE, ROUTE_LENGTH, ROW, SEEN_RADIUS, SFM, SHAPE, START_X, START_Y, STOPPED, TAIL, TARGET, THETA,
     UNOBSTRUCTED, V0, V1, VMAX0, VMAX1, VMIN0, VMIN1, WANDER, WANDER_X0, WANDER_X1, WANDER_Y0, WANDER_Y1, WIDTH, X, Y,
@@ -105,7 +105,7 @@ def to_command(F: np.ndarray, I: np.ndarray, m: int, vx: float, vy: float, w_max
 def _sfm(F, I, params, goals, objects, segments, m, neighbors, count, dt):  # noqa: E741
     """The social-force command of mover ``m`` among the first ``count`` rows of ``neighbors``."""
     row = I[m, ROW]
-    desired_x, desired_y = desired_velocity(F, I, goals, m)
+    desired_x, desired_y = desire(*desired_velocity(F, I, goals, m), params[m, VMAX], I[m, GROUP] >= 0)
     vx, vy = social_force_velocity(F[m, X], F[m, Y], objects[row, OVX], objects[row, OVY], F[m, SEEN_RADIUS] + EXTEND,
                                    desired_x, desired_y, neighbors, count, segments, params[m])
     w_max = velocity_range(F, m, dt)[3]

@@ -1,0 +1,188 @@
+"""Movers in flatland: routes, behaviours, sensing, contact and the collision modes.
+
+Each test builds a small scenario whose outcome is known by hand: a mover on a patrol passes its
+waypoints at its speed, the lidar sees it, touching it is a collision (who moved into whom told
+apart), and each collision mode halts what IR-SIM's halts.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from common.errors import ConfigError
+from common.motion.spec import Dash, Motion, Orca, Sfm
+from common.scenario import BoxObstacle, CircleObstacle, LidarSpec, Scenario, SegmentObstacle, WorldSpec, scenario_from_mapping
+from flatland.world import World
+
+
+def person(x: float, y: float, goals, speed: float = 1.0, **motion) -> CircleObstacle:
+    return CircleObstacle(x=x, y=y, radius=0.25, motion=Motion(behavior=motion.pop("behavior", Dash()), goals=goals,
+                                                               vel_max=(speed, speed), **motion))
+
+
+def world_of(*obstacles, start=(1.0, 1.0, 0.0), mode="stop", **scenario) -> World:
+    spec = WorldSpec(collision_mode=mode)
+    return World(Scenario(world=spec, start=start, goal=(9.0, 1.0), obstacles=list(obstacles), **scenario), seed=0)
+
+
+def positions(world: World, steps: int, command=(0.0, 0.0)) -> np.ndarray:
+    world.reset()
+    return np.array([world.step(*command).movers.rows[0, :2] for _ in range(steps)])
+
+
+def test_a_dash_mover_moves_its_speed_once_a_step_until_it_arrives():
+    world = world_of(person(2.0, 5.0, [(5.0, 5.0)], speed=1.0))
+    path = positions(world, 40)
+    steps = np.hypot(*np.diff(path, axis=0).T)
+    np.testing.assert_allclose(steps[:25], 0.1, atol=1e-12)  # 1 m/s for 0.1 s: advanced once per step
+    np.testing.assert_allclose(path[-1], (5.0, 5.0), atol=0.1)  # within its goal threshold, it stops
+    assert np.all(steps[-5:] == 0.0)
+
+
+@pytest.mark.parametrize(("route", "visits"), [
+    ("once", [(4, 5), (4, 8)]),
+    ("loop", [(4, 5), (4, 8), (4, 5), (4, 8)]),
+    ("back_and_forth", [(4, 5), (4, 8), (4, 5), (2, 5), (4, 5)]),
+])
+def test_a_patrol_visits_its_waypoints_in_order(route, visits):
+    world = world_of(person(2.0, 5.0, [(4.0, 5.0), (4.0, 8.0)], speed=1.0, route=route, goal_threshold=0.05))
+    path = positions(world, 250)
+    reached = []
+    for x, y in path:
+        near = [v for v in [(4, 5), (4, 8), (2, 5)] if math.hypot(x - v[0], y - v[1]) < 0.06]
+        if near and (not reached or reached[-1] != near[0]):
+            reached.append(near[0])
+    assert reached[:len(visits)] == visits
+    if route == "once":
+        assert reached == visits
+
+
+def test_a_wanderer_draws_its_goals_from_the_episode_seed():
+    region = (1.0, 1.0, 9.0, 9.0)
+    world = world_of(person(5.0, 5.0, [(6.0, 5.0)], wander=region, goal_threshold=0.2))
+
+    def drive(seed: int) -> np.ndarray:
+        world.reset(seed=seed)
+        return np.array([world.step(0.0, 0.0).movers.rows[0, :2] for _ in range(300)])
+
+    first, again, other = drive(3), drive(3), drive(4)
+    assert np.array_equal(first, again)
+    assert not np.array_equal(first, other)
+    assert np.hypot(*(first.max(axis=0) - first.min(axis=0))) > 3.0  # it went on to new goals
+    assert np.all((first >= 1.0 - 1e-9) & (first <= 9.0 + 1e-9))
+
+
+def test_the_lidar_sees_a_mover_coming():
+    # A person walks at the robot along the x axis; the beam straight ahead (37 beams all round
+    # have one) shortens by 0.1 m a step.
+    world = world_of(person(4.0, 1.0, [(1.5, 1.0)], speed=1.0), lidar=LidarSpec(beams=37))
+    scenario = world.scenario
+    ahead = int(np.argmin(np.abs(scenario.lidar.beam_angles())))
+    world.reset()
+    ranges = [world.step(0.0, 0.0).lidar[ahead] for _ in range(5)]
+    np.testing.assert_allclose(np.diff(ranges), -0.1, atol=1e-9)
+    np.testing.assert_allclose(ranges[0], 4.0 - 0.1 - 1.0 - 0.25, atol=1e-9)
+
+
+def test_a_mover_walking_into_the_robot_is_its_collision():
+    world = world_of(person(3.0, 1.0, [(0.5, 1.0)], speed=1.0), mode="unobstructed_obstacles")
+    world.reset()
+    for _ in range(30):
+        readings = world.step(0.0, 0.0)
+        if readings.collided:
+            break
+    assert readings.contact.kind == "mover" and readings.contact.by == "mover" and readings.contact.mover == 0
+
+
+def test_the_robot_driving_into_a_standing_mover_is_its_collision():
+    standing = CircleObstacle(x=3.0, y=1.0, radius=0.25, motion=Motion(goals=[(3.0, 1.0)]))
+    world = world_of(standing)
+    world.reset()
+    for _ in range(30):
+        readings = world.step(1.0, 0.0)
+        if readings.collided:
+            break
+    assert readings.contact == ("mover", 0, "robot")
+    assert readings.pose.x == pytest.approx(3.0 - 0.45, abs=0.1)
+
+
+def test_in_stop_mode_a_mover_halts_on_touching_a_wall_and_otherwise_passes_through():
+    wall = SegmentObstacle(points=[(5.0, 3.0), (5.0, 7.0)])
+
+    def end(mode: str) -> float:
+        world = world_of(wall, person(3.0, 5.0, [(7.0, 5.0)]), mode=mode)
+        return positions(world, 60)[-1, 0]
+
+    assert end("stop") == pytest.approx(5.0 - 0.25, abs=0.1)
+    assert end("unobstructed") == pytest.approx(7.0, abs=0.1)
+    assert end("unobstructed_obstacles") == pytest.approx(7.0, abs=0.1)  # an obstacle's role passes on
+
+
+def test_unobstructed_obstacles_halts_movers_whose_role_is_robot():
+    wall = SegmentObstacle(points=[(5.0, 3.0), (5.0, 7.0)])
+    world = world_of(wall, person(3.0, 5.0, [(7.0, 5.0)], role="robot"), mode="unobstructed_obstacles")
+    assert positions(world, 60)[-1, 0] == pytest.approx(5.0 - 0.25, abs=0.1)
+
+
+def test_the_robot_passes_through_things_when_unobstructed_and_says_it_touched():
+    world = world_of(BoxObstacle(x=3.0, y=1.0, length=0.5, width=1.0), mode="unobstructed")
+    world.reset()
+    readings = [world.step(1.0, 0.0) for _ in range(40)]
+    assert readings[-1].pose.x == pytest.approx(5.0, abs=1e-9)  # straight through
+    assert any(r.collided for r in readings) and not readings[-1].collided
+
+
+def test_a_forklift_turns_round_at_the_ends_of_its_aisle():
+    motion = Motion(behavior=Dash(angle_tolerance=0.05), goals=[(7.0, 5.0)], route="back_and_forth", kinematics="diff",
+                    vel_max=(1.0, 1.5), vel_min=(0.0, -1.5), goal_threshold=0.2, label="forklift")
+    world = world_of(BoxObstacle(x=3.0, y=5.0, length=1.0, width=0.6, motion=motion), mode="unobstructed_obstacles")
+    world.reset()
+    rows = np.array([world.step(0.0, 0.0).movers.rows[0] for _ in range(200)])
+    assert rows[:, 0].max() > 6.7 and rows[40:, 0].min() < 3.3  # there and back again
+    assert np.all(np.abs(rows[:, 1] - 5.0) < 0.4)  # along its aisle, arcing round at its ends (IR-SIM's dash)
+    assert np.all(rows[:, 3] * np.cos(rows[:, 2]) + rows[:, 4] * np.sin(rows[:, 2]) >= -1e-9)  # never reversing
+
+
+@pytest.mark.parametrize("behavior", [Orca(neighbor_dist=4.0, time_horizon=2.0), Sfm(vmax=1.0, force_factor_social=10.0,
+                                                                                   safety_radius=0.3, lambda_importance=1.0)])
+def test_people_who_see_the_robot_go_round_it_and_blind_ones_walk_into_it(behavior):
+    def crash(reacting: bool) -> bool:
+        walker = person(1.0, 5.0, [(9.0, 5.0)], behavior=behavior, group="people", reacts_to_robot=reacting)
+        world = world_of(walker, start=(5.0, 5.0, 0.0), mode="unobstructed_obstacles")
+        world.reset()
+        return any(world.step(0.0, 0.0).collided for _ in range(120))
+
+    assert not crash(True) and crash(False)
+
+
+@pytest.mark.parametrize(("motion", "message"), [
+    ({"goals": [[float("nan"), 1.0]]}, "obstacles.0.circle.motion.goals.0.0: Input should be a finite number"),
+    ({"goals": [[12.0, 1.0]]}, "obstacles.0.circle.motion.goals.0: (12, 1) lies outside the world"),
+    ({"goals": [[2.0, 1.0]], "vel_max": [11.0, 1.0]},
+     "obstacles.0.circle.motion.vel_max.0: Input should be less than or equal to 10"),
+    ({"goals": [[2.0, 1.0]], "vel_min": [1.0, 0.0], "vel_max": [0.5, 1.0]}, "vel_min [1.0, 0.0] exceeds vel_max"),
+    ({}, "a motion needs goals or a wander region"),
+    ({"wander": [5.0, 5.0, 11.0, 9.0]}, "obstacles.0.circle.motion.wander: [5.0, 5.0, 11.0, 9.0] reaches outside the world"),
+    ({"goals": [[2.0, 1.0]], "behavior": {"name": "teleport"}},
+     "obstacles.0.circle.motion.behavior: Input tag 'teleport' found using 'name' does not match any of the expected "
+     "tags: 'dash', 'rvo', 'orca', 'sfm'"),
+])
+def test_bad_motions_are_one_line_errors_naming_the_field(motion, message):
+    data = {"obstacles": [{"type": "circle", "x": 5.0, "y": 5.0, "radius": 0.3, "motion": motion}]}
+    with pytest.raises(ConfigError) as error:
+        scenario_from_mapping(data, "world.yaml")
+    text = str(error.value)
+    assert message in text and "\n" not in text and text.startswith("world.yaml: ")
+
+
+def test_too_many_movers_and_mixed_groups_are_refused():
+    walker = {"type": "circle", "x": 5.0, "y": 5.0, "radius": 0.1, "motion": {"goals": [[5.0, 6.0]]}}
+    with pytest.raises(ConfigError, match="501 moving obstacles; allowed: at most 500"):
+        scenario_from_mapping({"obstacles": [walker] * 501})
+    orca = {**walker, "motion": {"goals": [[5.0, 6.0]], "behavior": {"name": "orca"}, "group": "g"}}
+    sfm = {**walker, "motion": {"goals": [[5.0, 6.0]], "behavior": {"name": "sfm"}, "group": "g"}}
+    with pytest.raises(ConfigError, match="the movers of group 'g' differ"):
+        scenario_from_mapping({"obstacles": [orca, sfm]})
