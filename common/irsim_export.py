@@ -1,19 +1,31 @@
 """Write a scenario as an IR-SIM world mapping, so IR-SIM can run the very same world (benchmarks,
-parity checks). Boundary walls, which IR-SIM lacks, become a closed ``linestring`` obstacle."""
+parity checks). Boundary walls, which IR-SIM lacks, become a closed ``linestring`` obstacle, last.
+
+Movers become IR-SIM's moving objects: their kinematics, limits, goals and behaviour with IR-SIM's
+names (a ``back_and_forth`` route as the goal list a ``loop`` runs through; a wanderer's region as
+``range_low``/``range_high``, IR-SIM drawing its first goal itself), a group as one YAML group with
+its ``group_behavior``, a mover blind to the robot as ``target_roles: obstacle``. What IR-SIM cannot
+say is a one-line :class:`ConfigError`: members of a group whose parameters differ (IR-SIM's groups
+share theirs), and an ORCA group that sees the robot (IR-SIM's ORCA sees its group only).
+"""
 
 from __future__ import annotations
 
 import math
 from typing import Any
 
+from common.errors import ConfigError
+from common.motion.spec import Motion, Orca
 from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario
 
 _ORIGIN = [0.0, 0.0, 0.0]
+_ORCA_NAMES = {"neighbor_dist": "neighborDist", "max_neighbors": "maxNeighbors", "time_horizon": "timeHorizon",
+               "time_horizon_obst": "timeHorizonObst", "safe_radius": "safe_radius", "max_speed": "maxSpeed"}
 
 
 def _obstacle(obstacle) -> dict[str, Any]:
     if isinstance(obstacle, CircleObstacle):
-        shape, state = {"name": "circle", "radius": obstacle.radius}, [obstacle.x, obstacle.y, 0.0]
+        shape, state = {"name": "circle", "radius": obstacle.radius}, [obstacle.x, obstacle.y, obstacle.yaw]
     elif isinstance(obstacle, BoxObstacle):
         shape = {"name": "rectangle", "length": obstacle.length, "width": obstacle.width}
         state = [obstacle.x, obstacle.y, obstacle.yaw]
@@ -22,6 +34,87 @@ def _obstacle(obstacle) -> dict[str, Any]:
     else:
         shape, state = {"name": "linestring", "vertices": [list(p) for p in obstacle.points]}, _ORIGIN
     return {"shape": shape, "state": list(state), "unobstructed": obstacle.unobstructed}
+
+
+def _behavior(motion: Motion) -> dict[str, Any]:
+    """IR-SIM's behaviour mapping: the behaviour's parameters, its route and whom it avoids."""
+    behavior = motion.behavior
+    values = behavior.model_dump(exclude={"name"}, exclude_none=True)
+    if isinstance(behavior, Orca):
+        values = {_ORCA_NAMES[key]: value for key, value in values.items()}
+    out: dict[str, Any] = {"name": behavior.name, **values}
+    if motion.wander is not None:
+        x0, y0, x1, y1 = motion.wander
+        out.update(wander=True, range_low=[x0, y0, -math.pi], range_high=[x1, y1, math.pi])
+    elif motion.route != "once":
+        out["loop"] = True
+    if not motion.reacts_to_robot:
+        out["target_roles"] = "obstacle"
+    return out
+
+
+def _mover(obstacle) -> dict[str, Any]:
+    """A moving obstacle as IR-SIM's moving object (its behaviour written by the caller)."""
+    motion = obstacle.motion
+    goals = motion.route_from((obstacle.x, obstacle.y)) if motion.wander is None else list(motion.goals[:1])
+    entry = {**_obstacle(obstacle), "kinematics": {"name": motion.kinematics},
+             "goal": [[x, y, 0.0] for x, y in goals] if len(goals) > 1 else [*goals[0], 0.0],
+             "goal_threshold": motion.goal_threshold, "vel_max": list(motion.vel_max), "vel_min": list(motion.lower),
+             "velocity": list(motion.velocity), "arrive_mode": "position"}
+    if any(math.isfinite(a) for a in motion.acce):
+        entry["acce"] = list(motion.acce)
+    return entry
+
+
+def _groups(scenario: Scenario) -> tuple[list[dict], list[dict]]:
+    """The robots (after the controlled one) and obstacles: static and per-object movers one by
+    one, each group as one YAML group with a per-object list of every key."""
+    robots: list[dict] = []
+    obstacles: list[dict] = []
+    grouped: dict[str, list] = {}
+    for index, obstacle in enumerate(scenario.obstacles):
+        motion = getattr(obstacle, "motion", None)
+        where = f"obstacles.{index}.{obstacle.type}.motion"
+        if motion is None:
+            obstacles.append(_obstacle(obstacle))
+            continue
+        section = robots if motion.role == "robot" else obstacles
+        if motion.group is None:
+            section.append({**_mover(obstacle), "behavior": _behavior(motion)})
+            continue
+        if motion.group not in grouped:
+            grouped[motion.group] = []
+            section.append({"group": motion.group})  # a placeholder, filled below, keeps the order
+        grouped[motion.group].append((obstacle, where))
+    for section in (robots, obstacles):
+        for k, entry in enumerate(section):
+            if set(entry) == {"group"}:
+                section[k] = _group(grouped[entry["group"]])
+    return robots, obstacles
+
+
+def _group(members: list) -> dict[str, Any]:
+    first, where = members[0]
+    behavior = _behavior(first.motion)
+    for obstacle, path in members:
+        if _behavior(obstacle.motion) != behavior:
+            raise ConfigError(None, path, "IR-SIM's group behaviour has one set of parameters; allowed: the same "
+                                          "behaviour and route settings for every member of the group")
+    if isinstance(first.motion.behavior, Orca) and first.motion.reacts_to_robot:
+        raise ConfigError(None, where, "IR-SIM's ORCA group sees only its members; allowed: reacts_to_robot: false")
+    entries = [_mover(obstacle) for obstacle, _ in members]
+    out: dict[str, Any] = {"number": len(entries), "distribution": {"name": "manual"},
+                           "group_behavior": behavior}
+    for key in entries[0]:
+        values = [entry[key] for entry in entries]
+        if all(value == values[0] for value in values):
+            out[key] = values[0]
+        elif isinstance(values[0], (list, dict)):
+            out[key] = values  # one per object (IR-SIM's fan-out)
+        else:  # IR-SIM reads a list of numbers or flags as one vector, shared by every member
+            raise ConfigError(None, f"{where.rsplit('.motion', 1)[0]}", f"the members of group {first.motion.group!r} "
+                              f"differ in {key}; allowed: one value for the group (IR-SIM's)")
+    return out
 
 
 def scenario_to_irsim(scenario: Scenario) -> dict[str, Any]:
@@ -50,7 +143,7 @@ def scenario_to_irsim(scenario: Scenario) -> dict[str, Any]:
     }
     if math.isfinite(robot.accel_v) or math.isfinite(robot.accel_w):
         robot_entry["acce"] = [robot.accel_v, robot.accel_w]
-    obstacles = [_obstacle(o) for o in scenario.obstacles]
+    robots, obstacles = _groups(scenario)
     if world.walls:
         x0, y0 = world.offset
         x1, y1 = x0 + world.width, y0 + world.height
@@ -58,7 +151,7 @@ def scenario_to_irsim(scenario: Scenario) -> dict[str, Any]:
         obstacles.append({"shape": {"name": "linestring", "vertices": ring}, "state": list(_ORIGIN)})
     return {
         "world": {"width": world.width, "height": world.height, "step_time": world.step_time,
-                  "offset": list(world.offset), "collision_mode": "stop"},
-        "robot": robot_entry,
+                  "offset": list(world.offset), "collision_mode": world.collision_mode},
+        "robot": [robot_entry, *robots],
         "obstacle": obstacles,
     }

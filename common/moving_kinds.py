@@ -43,9 +43,12 @@ OFF_PATHS = 0.9  # m: from a warehouse's start and goal to the lines forklifts a
 # The social force among generated people. IR-SIM's defaults let people walk into a robot standing
 # still (65% of 40 crowds within 30 s) and into each other (1.6 overlapping pairs a step); a
 # stronger push (10, not 2.1) that saturates at a personal space of 0.3 m, weighing distance over
-# closing speed (lambda 1, not 2), leaves neither, at the same pace (tests/test_moving_kinds.py
-# measures both). Beyond 3 m (IR-SIM: 10) people leave each other alone.
-CROWD_SFM = {"force_factor_social": 10.0, "safety_radius": 0.3, "lambda_importance": 1.0, "neighbor_threshold": 3.0}
+# closing speed (lambda 1, not 2), leaves neither, at the same pace; and walls felt within a metre
+# or two (2 and 0.5 m, as IR-SIM's own head-on example; its defaults, 10 and 0.8 m, reach 4 m and
+# squeeze people between a wall and the robot). tests/test_moving_kinds.py measures both. Beyond
+# 3 m (IR-SIM: 10) people leave each other alone.
+CROWD_SFM = {"force_factor_social": 10.0, "safety_radius": 0.3, "lambda_importance": 1.0, "neighbor_threshold": 3.0,
+             "force_factor_obstacle": 2.0, "sigma_obstacle": 0.5}
 ORCA_CROWD = Orca(neighbor_dist=4.0, max_neighbors=8, time_horizon=2.0, time_horizon_obst=2.0, safe_radius=0.05)
 
 

@@ -249,7 +249,7 @@ class World:
         if self.movers is None:
             self.readings = self._read(0.0, self.lidar.scan(*self.pose))
             return self.readings
-        self.movers.reset()
+        self.movers.reset(self.pose)
         self.readings = self._read(0.0, self.lidar.scan(*self.pose, *self.movers.visible()), None)
         return self.readings
 
@@ -257,8 +257,6 @@ class World:
         """Drive with (v m/s, w rad/s) for one step and return the new readings."""
         ranges = None
         movers = self.movers
-        if movers is not None:
-            movers.begin(self.pose, *self.velocity, self.stopped)
         if self.stopped:
             v = w = 0.0
         else:

@@ -15,16 +15,18 @@ from pathlib import Path
 from typing import Any
 
 from common.controllers.base import Controller, LidarGeometry
+from common.controllers.dwa import DynamicWindow
 from common.controllers.go_to_goal import GoToGoal
 from common.controllers.path_follower import AStarPursuit, PathFollower, RrtPursuit
 from common.controllers.pid_blend import PidHeadingBlend
 from common.controllers.potential_field import PotentialField
 from common.controllers.reactive import ReactiveAvoidance
+from common.controllers.velocity_obstacle import VelocityObstacle
 from common.errors import ConfigError
 from common.params import coerce, keyword_parameters
 
-__all__ = ["AStarPursuit", "CONTROLLERS", "Controller", "GoToGoal", "PathFollower", "RrtPursuit", "LidarGeometry", "PidHeadingBlend", "PotentialField",
-           "ReactiveAvoidance", "controller_parameters", "make_controller"]
+__all__ = ["AStarPursuit", "CONTROLLERS", "Controller", "DynamicWindow", "GoToGoal", "PathFollower", "RrtPursuit", "LidarGeometry",
+           "PidHeadingBlend", "PotentialField", "ReactiveAvoidance", "VelocityObstacle", "controller_parameters", "make_controller"]
 
 CONTROLLERS: dict[str, type[Controller]] = {
     "go_to_goal": GoToGoal,
@@ -33,6 +35,8 @@ CONTROLLERS: dict[str, type[Controller]] = {
     "pid_blend": PidHeadingBlend,
     "astar_pursuit": AStarPursuit,
     "rrt_pursuit": RrtPursuit,
+    "dwa": DynamicWindow,
+    "orca": VelocityObstacle,
 }
 
 

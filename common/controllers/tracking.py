@@ -40,7 +40,10 @@ from typing import NamedTuple
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from common.controllers.base import LidarGeometry
+from common.controllers.base import Controller, LidarGeometry
+from common.controllers.waypoint import Guide
+from common.readings import Readings
+from common.scenario import LidarSpec, RobotProfile
 
 _FAR = 1e6  # the cost of a pairing beyond the gate: never chosen over a feasible one
 
@@ -254,3 +257,49 @@ class ScanTracker:
         # Only where the beams lie closer together than any body is wide could nothing have hidden between them.
         narrow = distance * self.spacing < self.min_width
         return inside & narrow & (distance < free - slack)
+
+
+class TrackingController(Controller):
+    """A controller that sees movers through a :class:`ScanTracker` (with ``track_movers`` False,
+    every return counts as static) and steers for a :class:`~common.controllers.waypoint.Guide`'s
+    target (with ``guide`` False, for the goal), both started afresh every episode; it knows its
+    control period."""
+
+    track_movers: bool
+    guide: bool
+    margin: float
+    step_time: float | None
+    first_period = 0.1  # s: the control period assumed before two steps have shown it
+    guide_slack = 0.1  # m: the guide's path keeps this much more than ``margin`` from static returns
+
+    def bind(self, robot: RobotProfile, lidar: LidarSpec, goal_threshold: float = 0.3) -> None:
+        super().bind(robot, lidar, goal_threshold)
+        self.tracker = ScanTracker(self.lidar)
+        self.planner = Guide(self.lidar, robot.bounding_radius + self.margin + self.guide_slack)
+
+    def reset(self) -> None:
+        self.tracker.reset()
+        self.planner.reset()
+        self._previous_time: float | None = None
+
+    def scene(self, readings: Readings) -> Scene:
+        """What this step's scan shows, at the odometry pose."""
+        if self.track_movers:
+            return self.tracker.update(readings.lidar, readings.odometry.pose, readings.time)
+        static = self.lidar.returns_world_frame(readings.lidar, readings.odometry.pose)
+        return Scene(static, np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0))
+
+    def target(self, readings: Readings, scene: Scene, goal: tuple[float, float]) -> tuple[np.ndarray, float]:
+        """(where to steer, metres of path from there on to the goal)."""
+        if not self.guide:
+            return np.asarray(goal, float), 0.0
+        return self.planner.target(readings.lidar, readings.odometry.pose, scene.static, np.asarray(goal, float))
+
+    def period(self, time: float) -> float:
+        """The control period: ``step_time`` if given, else the time since the last call."""
+        if self.step_time is not None:
+            return self.step_time
+        known = self._previous_time is not None and time > self._previous_time
+        dt = time - self._previous_time if known else self.first_period
+        self._previous_time = time
+        return dt

@@ -347,6 +347,44 @@ def reset_ms(repeats: int = 30) -> dict[str, float]:
     return figures
 
 
+def moving_bench_scenario(people: int = 20, speed: float = 1.0) -> Scenario:
+    """The moving benchmark world: the first eval ``crowd`` of difficulty 1 (20 people under the
+    social force, planning as one group, seeing the robot), every person at ``speed`` and walking
+    back and forth to its first goal, so that IR-SIM runs the same world (IR-SIM's group shares one
+    speed, and each simulator would draw a wanderer's next goals from its own generator)."""
+    from common.generators import generate
+
+    crowd = generate("crowd", 0, 1.0, "eval", reacting=True, behavior="sfm")
+    walkers = [person.model_copy(update={"motion": person.motion.model_copy(update={
+        "wander": None, "route": "back_and_forth", "vel_max": (speed, speed),
+        "behavior": person.motion.behavior.model_copy(update={"vmax": speed})})}) for person in crowd.movers[:people]]
+    return crowd.model_copy(update={"obstacles": [*crowd.static_obstacles, *walkers]})
+
+
+def frozen(scenario: Scenario) -> Scenario:
+    """The same world with every mover standing where it starts."""
+    return scenario.model_copy(update={"obstacles": [
+        obstacle.model_copy(update={"motion": None}) if getattr(obstacle, "motion", None) is not None else obstacle
+        for obstacle in scenario.obstacles]})
+
+
+def movers_figures(steps: int) -> dict[str, Any]:
+    """The env among 20 walking people against the same world frozen (each setting's faster of two
+    alternated runs: this machine is noisy), and IR-SIM's own steps on the same moving world."""
+    moving = moving_bench_scenario()
+    still = frozen(moving)
+    runs: dict[str, list[float]] = {"moving": [], "frozen": []}
+    for _ in range(2):
+        runs["moving"].append(flatland_steps_per_s(moving, steps))
+        runs["frozen"].append(flatland_steps_per_s(still, steps))
+    flat, static = max(runs["moving"]), max(runs["frozen"])
+    theirs = irsim_steps_per_s(moving, steps=max(300, steps // 40))
+    return {"movers_env_steps_per_s": round(flat, 1), "movers_frozen_env_steps_per_s": round(static, 1),
+            "movers_vs_static": round(flat / static, 3),
+            "movers_irsim_steps_per_s": None if theirs is None else round(theirs, 1),
+            "movers_flatland_vs_irsim": None if theirs is None else round(flat / theirs, 1)}
+
+
 def run_benchmarks(steps: int = 20_000) -> dict[str, Any]:
     """All figures of this milestone, as one flat mapping."""
     scenario = bench_scenario()
@@ -371,6 +409,7 @@ def run_benchmarks(steps: int = 20_000) -> dict[str, Any]:
         **reset_ms(),
         **irsim_circle_world_figures(steps),
         "warehouse_env_steps_per_s": round(flatland_steps_per_s("warehouse", max(500, steps // 4)), 1),
+        **movers_figures(max(1000, steps // 4)),
         **_ppo_figures(max(2048, steps)),
     }
 

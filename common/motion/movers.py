@@ -1,9 +1,9 @@
 """A scenario's moving obstacles, advanced step by step the same way in every tier.
 
-A tier builds :class:`Movers` from its scenario and, each step, calls :meth:`Movers.begin` with
-where the robot is and the command it moved with (the groups plan from that snapshot), moves the
-robot itself, then calls :meth:`Movers.finish` with where it went: the movers step after it, as
-in IR-SIM, and are judged. The movers' poses then go into the tier's sensors. Everything random
+A tier builds :class:`Movers` from its scenario, starts each episode with :meth:`Movers.reset`
+(where the robot starts; the groups plan from that snapshot) and, each step, moves the robot
+itself, then calls :meth:`Movers.finish` with where it went: the movers step after it, as in
+IR-SIM, are judged, and the groups plan the next step. The movers' poses then go into the tier's sensors. Everything random
 (a wanderer's next goal) is drawn from the generator the tier passes, so a seed fixes the episode.
 """
 
@@ -16,7 +16,7 @@ import numpy as np
 from common.irsim_geometry import circle_outline, rectangle_outline
 from common.motion.rvo import rvo_velocity
 from common.motion.step import (
-    COLLISION_MODES, begin_step, command, desired_velocity, draw_wanderers, finish_step, gather, move, prepare,
+    COLLISION_MODES, command, desired_velocity, draw_wanderers, finish_step, gather, move, plan_step, prepare,
     snapshot, sync_robot,
 )
 from common.motion.steering import world_to_diff, world_to_omni
@@ -70,10 +70,10 @@ class Movers:
         if t.irsim:
             self._outline = rectangle_outline(robot.length, robot.width) if robot.shape == "box" else \
                 circle_outline(robot.radius)
-        self.reset()
 
-    def reset(self) -> None:
-        """Every mover back at its start with its first goal and its first command."""
+    def reset(self, pose: tuple[float, float, float]) -> None:
+        """Every mover back at its start with its first goal and its first command; the robot at
+        ``pose``, at rest; the groups' plans for the first step."""
         t = self.table
         F, I = t.F, t.I  # noqa: E741
         F[:, X], F[:, Y], F[:, THETA] = F[:, START_X], F[:, START_Y], F[:, INIT_THETA]
@@ -89,19 +89,17 @@ class Movers:
         diff = I[m, KINEMATICS] == DIFF  # the two cases of step.world_velocity, for every mover at once
         t.objects[rows, OVX] = np.where(diff, v0 * c, v0 * c - v1 * s)
         t.objects[rows, OVY] = np.where(diff, v0 * s, v0 * s + v1 * c)
-        self._snapshot()
-
-    def begin(self, pose: tuple[float, float, float], v: float, w: float, stopped: bool) -> None:
-        """Start a step: the robot is at ``pose`` and last moved with (v, w); the groups plan."""
-        t = self.table
-        begin_step(t.F, t.I, t.params, t.goals, t.objects, t.segments, t.orca_velocity, self._members, self._inside,
-                   self._dt, self._neighbors, self._outline, t.irsim, self._robot, *pose, v, w, stopped)
+        snapshot(t.F, t.I, t.objects, self._moving, self._circles, self._boxes, self._states, self._circle_rows,
+                 self._box_rows)
+        plan_step(t.F, t.I, t.params, t.goals, t.objects, t.segments, t.orca_velocity, self._members, self._inside,
+                  self._dt, self._neighbors, self._outline, t.irsim, self._robot, *pose, 0.0, 0.0, False)
 
     def finish(self, pose: tuple[float, float, float], v: float, w: float, stopped: bool,
                rng: np.random.Generator) -> int:
-        """End the step: the robot went to ``pose`` with (v, w); every mover steps (a wanderer's
-        next goal drawn from ``rng``) and is judged. The index (a row of :meth:`states`) of the
-        first mover the robot touches, or -1."""
+        """End the step: the robot went to ``pose`` with (v, w) (``stopped``: it was halted when the
+        step began); every mover steps (a wanderer's next goal drawn from ``rng``), is judged, and
+        the groups plan the next step. The index (a row of :meth:`states`) of the first mover the
+        robot touches, or -1."""
         t = self.table
         if self._wanderer_arrived:
             draw_wanderers(t.F, t.I, t.goals, rng)
@@ -110,7 +108,8 @@ class Movers:
         touched, self._wanderer_arrived = finish_step(
             t.F, t.I, t.params, t.goals, t.routes, t.objects, t.segments, t.outlines, t.irsim, self._dt,
             self._neighbors, self._outline, self._robot, *pose, v, w, stopped, self._python, self._mode,
-            *self._contacts, self._moving, self._circles, self._boxes, self._states, self._circle_rows, self._box_rows)
+            *self._contacts, self._moving, self._circles, self._boxes, self._states, self._circle_rows, self._box_rows,
+            t.orca_velocity, self._members, self._inside)
         return -1 if touched < 0 else int(np.searchsorted(self._moving, touched))
 
     def _advance_in_python(self, pose: tuple[float, float, float], v: float, w: float, stopped: bool) -> None:
@@ -155,10 +154,6 @@ class Movers:
         length, half width), unobstructed ones left out (arrays the next step overwrites)."""
         return self._circle_rows, self._box_rows
 
-    def _snapshot(self) -> None:
-        t = self.table
-        snapshot(t.F, t.I, t.objects, self._moving, self._circles, self._boxes, self._states, self._circle_rows,
-                 self._box_rows)
 
 
 def _groups(I: np.ndarray, objects: int) -> tuple[np.ndarray, np.ndarray]:  # noqa: E741

@@ -29,35 +29,66 @@ PARAMETERS = ("vmax", "step_time", "neighbor_threshold", "relaxation_time", "for
 
 
 @register_jitable
-def _social_force(x: float, y: float, vx: float, vy: float, neighbors: np.ndarray, count: int,
-                  p: np.ndarray) -> tuple[float, float]:
-    fx = fy = 0.0
+def _square(value: float, exact: bool) -> float:
+    """``value ** 2`` as IR-SIM's per-agent model has it (the C library's pow, which differs from
+    value * value in the last bit at times) if ``exact``, else as its batched model has it (value * value)."""
+    return c_pow(value, 2.0) if exact else value * value
+
+
+@register_jitable
+def _within(dx: float, dy: float, reach: float, exact: bool) -> bool:
+    """Whether a neighbour (dx, dy) away is within ``reach``: IR-SIM's per-agent test with pow
+    (decided by plain products, a hundred times cheaper, unless it is within rounding of the edge)
+    or its batched one."""
+    distance, limit = dx * dx + dy * dy, reach * reach
+    if not exact or abs(distance - limit) > 1e-9 * limit:
+        return distance < limit if exact else math.hypot(dx, dy) <= reach
+    return c_pow(dx, 2.0) + c_pow(dy, 2.0) < c_pow(reach, 2.0)
+
+
+@register_jitable
+def pair_force(x: float, y: float, vx: float, vy: float, ox: float, oy: float, ovx: float, ovy: float,
+               p: np.ndarray, exact: bool) -> tuple[float, float, bool]:
+    """The social force on an agent at (x, y) moving at (vx, vy) from one at (ox, oy) moving at
+    (ovx, ovy), and whether the other counts (within reach, not on top of it). Swapping the two
+    gives exactly the opposite force, when both have the same parameters: t = lambda dv + d turns
+    round, the angle between them does not."""
     reach = p[NEIGHBOR_THRESHOLD]
+    if not _within(x - ox, y - oy, reach, exact):
+        return 0.0, 0.0, False
+    dx, dy = ox - x, oy - y
+    dist = math.sqrt(dx * dx + dy * dy) if exact else math.hypot(dx, dy)
+    if dist < 1e-6 or dist > reach:
+        return 0.0, 0.0, False
+    d_hat_x, d_hat_y = dx / dist, dy / dist
+    tx = p[LAMBDA_IMPORTANCE] * (vx - ovx) + d_hat_x
+    ty = p[LAMBDA_IMPORTANCE] * (vy - ovy) + d_hat_y
+    t_norm = math.sqrt(tx * tx + ty * ty) if exact else math.hypot(tx, ty)
+    if t_norm < 1e-9:
+        return 0.0, 0.0, False
+    t_hat_x, t_hat_y = tx / t_norm, ty / t_norm
+    b = p[GAMMA] * t_norm
+    theta = math.atan2(t_hat_x * d_hat_y - t_hat_y * d_hat_x, t_hat_x * d_hat_x + t_hat_y * d_hat_y)
+    gap = max(dist - 2.0 * p[SAFETY_RADIUS], 0.0)
+    f_v = -math.exp(-gap / b - _square(p[N_VELOCITY] * b * theta, exact))
+    sign = 1.0 if theta > 0 else (-1.0 if theta < 0 else 0.0)
+    f_a = -sign * math.exp(-gap / b - _square(p[N_ANGULAR] * b * theta, exact))
+    return f_v * t_hat_x + f_a * -t_hat_y, f_v * t_hat_y + f_a * t_hat_x, True
+
+
+SOCIAL = np.array([NEIGHBOR_THRESHOLD, LAMBDA_IMPORTANCE, GAMMA, N_ANGULAR, N_VELOCITY, SAFETY_RADIUS])  # pair_force's
+
+
+@register_jitable
+def _social_force(x: float, y: float, vx: float, vy: float, neighbors: np.ndarray, count: int,
+                  p: np.ndarray, exact: bool) -> tuple[float, float]:
+    fx = fy = 0.0
     for k in range(count):
-        dx, dy = neighbors[k, 0] - x, neighbors[k, 1] - y
-        # IR-SIM's squares are the C library's pow, which differs from dx * dx in the last bit at times.
-        if not c_pow(x - neighbors[k, 0], 2.0) + c_pow(y - neighbors[k, 1], 2.0) < c_pow(reach, 2.0):
-            continue
-        dist = math.sqrt(dx * dx + dy * dy)
-        if dist < 1e-6 or dist > reach:
-            continue
-        d_hat_x, d_hat_y = dx / dist, dy / dist
-        tx = p[LAMBDA_IMPORTANCE] * (vx - neighbors[k, 2]) + d_hat_x
-        ty = p[LAMBDA_IMPORTANCE] * (vy - neighbors[k, 3]) + d_hat_y
-        t_norm = math.sqrt(tx * tx + ty * ty)
-        if t_norm < 1e-9:
-            continue
-        t_hat_x, t_hat_y = tx / t_norm, ty / t_norm
-        b = p[GAMMA] * t_norm
-        theta = math.atan2(t_hat_x * d_hat_y - t_hat_y * d_hat_x, t_hat_x * d_hat_x + t_hat_y * d_hat_y)
-        gap = max(dist - 2.0 * p[SAFETY_RADIUS], 0.0)
-        slow = p[N_VELOCITY] * b * theta
-        side = p[N_ANGULAR] * b * theta
-        f_v = -math.exp(-gap / b - c_pow(slow, 2.0))
-        sign = 1.0 if theta > 0 else (-1.0 if theta < 0 else 0.0)
-        f_a = -sign * math.exp(-gap / b - c_pow(side, 2.0))
-        fx += f_v * t_hat_x + f_a * -t_hat_y
-        fy += f_v * t_hat_y + f_a * t_hat_x
+        gx, gy, counts = pair_force(x, y, vx, vy, neighbors[k, 0], neighbors[k, 1], neighbors[k, 2], neighbors[k, 3],
+                                    p, exact)
+        if counts:
+            fx += gx
+            fy += gy
     return fx, fy
 
 
@@ -104,14 +135,24 @@ def desire(desired_x: float, desired_y: float, vmax: float, group: bool) -> tupl
 @register_jitable
 def social_force_velocity(x: float, y: float, vx: float, vy: float, radius: float, desired_x: float,
                           desired_y: float, neighbors: np.ndarray, count: int, segments: np.ndarray,
-                          p: np.ndarray) -> tuple[float, float]:
+                          p: np.ndarray, group: bool = False) -> tuple[float, float]:
     """The next world-frame velocity of an agent at (x, y) moving at (vx, vy) that desires to move
     at (desired_x, desired_y) (:func:`desire`), among the first ``count`` rows of ``neighbors``
     (x, y, vx, vy, radius) and the line obstacles ``segments`` (x1, y1, x2, y2), with the
-    parameters ``p`` (indexed by this module's constants)."""
+    parameters ``p`` (indexed by this module's constants); ``group``: as IR-SIM's batched group
+    model rounds it, else as its per-agent model."""
+    social = _social_force(x, y, vx, vy, neighbors, count, p, not group)
+    return velocity_under(x, y, vx, vy, radius, desired_x, desired_y, social, segments, p)
+
+
+@register_jitable
+def velocity_under(x: float, y: float, vx: float, vy: float, radius: float, desired_x: float, desired_y: float,
+                   social: tuple[float, float], segments: np.ndarray, p: np.ndarray) -> tuple[float, float]:
+    """The next velocity under the social force ``social`` (summed from :func:`pair_force`), the
+    relaxation toward the desire and the line obstacles' push, capped at ``vmax``."""
     vmax = p[VMAX]
     tau = p[RELAXATION_TIME]
-    social_x, social_y = _social_force(x, y, vx, vy, neighbors, count, p)
+    social_x, social_y = social
     obstacle_x, obstacle_y = _obstacle_force(x, y, radius, segments, p)
     ax = p[FORCE_DESIRED] * ((desired_x - vx) / tau) + p[FORCE_SOCIAL] * social_x + p[FORCE_OBSTACLE] * obstacle_x
     ay = p[FORCE_DESIRED] * ((desired_y - vy) / tau) + p[FORCE_SOCIAL] * social_y + p[FORCE_OBSTACLE] * obstacle_y

@@ -135,6 +135,14 @@ class Motion(Frozen):
                 raise ValueError(f"vel_min {list(low)} exceeds vel_max {list(self.vel_max)}; allowed: vel_min <= vel_max")
         return self
 
+    def route_from(self, start: tuple[float, float]) -> list[tuple[float, float]]:
+        """The goals a mover starting at ``start`` runs through before its route starts over
+        (IR-SIM's goal list): ``back_and_forth`` goes through the goals and back to the start."""
+        goals = [tuple(goal) for goal in self.goals]
+        if self.route == "back_and_forth" and len(goals) > 1:
+            goals = goals + goals[-2::-1] + [tuple(start)]
+        return goals
+
     @property
     def lower(self) -> tuple[float, float]:
         """The lower velocity limits (``vel_min``, or ``-vel_max``)."""

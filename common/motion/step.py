@@ -6,8 +6,8 @@ wanderer's was drawn before the step, by :func:`draw_wanderers`), finds its comm
 plan, ``dash``, or the social force among the others where they are now; ``rvo`` is the caller's,
 in Python) and moves (:func:`move`); then every mover is judged (:func:`settle`): arrival, which
 pops its goal queue, and contact, which stops it where the collision mode says.
-:func:`begin_step` and :func:`finish_step` are the two compiled calls a step makes around the
-robot's own move (a call costs microseconds a piece; a crowd's step, tens of them). The other
+:func:`finish_step` is the one compiled call a step makes after the robot's own move, the next
+step's plans included (a call costs microseconds; a crowd's step, tens of them). The other
 functions are plain Python where called from Python (``register_jitable``), so the slow path and
 the compiled one compute the same bits.
 """
@@ -24,7 +24,7 @@ from common.irsim_geometry import centroid, transformed
 from common.kernel_cache import kernel
 from common.kinematics import unicycle_euler
 from common.motion.orca import orca_velocities
-from common.motion.sfm import VMAX, desire, social_force_velocity
+from common.motion.sfm import SOCIAL, VMAX, desire, pair_force, social_force_velocity, velocity_under
 from common.motion.steering import (
     desired_omni_velocity, diff_dash, omni_dash, omni_to_world, world_to_diff, world_to_omni, wrap_to_pi,
 )
@@ -107,7 +107,8 @@ def _sfm(F, I, params, goals, objects, segments, m, neighbors, count, dt):  # no
     row = I[m, ROW]
     desired_x, desired_y = desire(*desired_velocity(F, I, goals, m), params[m, VMAX], I[m, GROUP] >= 0)
     vx, vy = social_force_velocity(F[m, X], F[m, Y], objects[row, OVX], objects[row, OVY], F[m, SEEN_RADIUS] + EXTEND,
-                                   desired_x, desired_y, neighbors, count, segments, params[m])
+                                   desired_x, desired_y, neighbors, count,
+                                   segments if I[m, TARGET] != ROBOTS else segments[:0], params[m], I[m, GROUP] >= 0)
     w_max = velocity_range(F, m, dt)[3]
     return to_command(F, I, m, vx, vy, w_max, dt, 0.02)
 
@@ -175,15 +176,55 @@ def _plan_orca(F, I, params, goals, objects, orca_velocity, members, inside, dt)
 
 @register_jitable
 def _plan_sfm(F, I, params, goals, objects, segments, members, inside, dt, neighbors):  # noqa: E741
-    for m in members:
-        count = 0
-        for other in members:  # the group first, then the objects outside it, as IR-SIM stacks them
-            if other != m:
-                count = _add_neighbor(objects, I[other, ROW], neighbors, count)
-        for row in range(objects.shape[0]):
-            if not inside[row] and sees(I, objects, m, row):
-                count = _add_neighbor(objects, row, neighbors, count)
-        F[m, PLAN0], F[m, PLAN1] = _sfm(F, I, params, goals, objects, segments, m, neighbors, count, dt)
+    """The social force among a group from one snapshot, as IR-SIM's batched model: each member
+    among the others (in order), then the objects outside the group it sees. A pair of members
+    with the same parameters pushes each other equally and oppositely (:func:`pair_force`), so
+    each such pair is computed once: the crowd's step costs half."""
+    k = members.shape[0]
+    pushes = np.zeros((k, k, 2))
+    counted = np.zeros((k, k), dtype=np.bool_)
+    for a in range(k):
+        i, ri = members[a], I[members[a], ROW]
+        for c in range(a + 1, k):
+            j, rj = members[c], I[members[c], ROW]
+            fx, fy, counts = pair_force(objects[ri, OX], objects[ri, OY], objects[ri, OVX], objects[ri, OVY],
+                                        objects[rj, OX], objects[rj, OY], objects[rj, OVX], objects[rj, OVY],
+                                        params[i], False)
+            pushes[a, c, 0], pushes[a, c, 1], counted[a, c] = fx, fy, counts
+            if _same_social(params[i], params[j]):
+                pushes[c, a, 0], pushes[c, a, 1], counted[c, a] = -fx, -fy, counts
+            else:
+                pushes[c, a, 0], pushes[c, a, 1], counted[c, a] = pair_force(
+                    objects[rj, OX], objects[rj, OY], objects[rj, OVX], objects[rj, OVY], objects[ri, OX],
+                    objects[ri, OY], objects[ri, OVX], objects[ri, OVY], params[j], False)
+    for a in range(k):
+        m = members[a]
+        row = I[m, ROW]
+        x, y, vx, vy = objects[row, OX], objects[row, OY], objects[row, OVX], objects[row, OVY]
+        fx = fy = 0.0
+        for c in range(k):
+            if counted[a, c]:
+                fx += pushes[a, c, 0]
+                fy += pushes[a, c, 1]
+        for other in range(objects.shape[0]):
+            if not inside[other] and sees(I, objects, m, other):
+                gx, gy, counts = pair_force(x, y, vx, vy, objects[other, OX], objects[other, OY], objects[other, OVX],
+                                            objects[other, OVY], params[m], False)
+                if counts:
+                    fx += gx
+                    fy += gy
+        desired_x, desired_y = desire(*desired_velocity(F, I, goals, m), params[m, VMAX], True)
+        wx, wy = velocity_under(F[m, X], F[m, Y], vx, vy, F[m, SEEN_RADIUS] + EXTEND, desired_x, desired_y,
+                                (fx, fy), segments if I[m, TARGET] != ROBOTS else segments[:0], params[m])
+        F[m, PLAN0], F[m, PLAN1] = to_command(F, I, m, wx, wy, velocity_range(F, m, dt)[3], dt, 0.02)
+
+
+@register_jitable
+def _same_social(p: np.ndarray, q: np.ndarray) -> bool:
+    for index in SOCIAL:
+        if p[index] != q[index]:
+            return False
+    return True
 
 
 @register_jitable
@@ -421,9 +462,9 @@ def sync_robot(F, I, objects, outline, irsim, robot, x, y, yaw, v, w, stopped) -
 
 
 @kernel
-def begin_step(F, I, params, goals, objects, segments, orca_velocity, members, inside, dt, neighbors,  # noqa: E741
-               outline, irsim, robot, x, y, yaw, v, w, stopped) -> None:
-    """The step before the robot moves: where the robot is, then the groups' plans."""
+def plan_step(F, I, params, goals, objects, segments, orca_velocity, members, inside, dt, neighbors,  # noqa: E741
+              outline, irsim, robot, x, y, yaw, v, w, stopped) -> None:
+    """Before an episode's first step: where the robot is, then the groups' plans."""
     sync_robot(F, I, objects, outline, irsim, robot, x, y, yaw, v, w, stopped)
     if members.shape[0] > 0:
         plan_groups(F, I, params, goals, objects, segments, orca_velocity, members, inside, dt, neighbors)
@@ -432,16 +473,21 @@ def begin_step(F, I, params, goals, objects, segments, orca_velocity, members, i
 @kernel
 def finish_step(F, I, params, goals, routes, objects, segments, outlines, irsim, dt, neighbors, outline,  # noqa: E741
                 robot, x, y, yaw, v, w, stopped, advanced, mode, circles, boxes, walls, rings, ring_index, moving,
-                seen_circles, seen_boxes, states, circle_rows, box_rows) -> tuple[int, bool]:
+                seen_circles, seen_boxes, states, circle_rows, box_rows, orca_velocity, members,
+                inside) -> tuple[int, bool]:
     """The step after the robot moved: where it is now, every mover's step (unless ``advanced``
-    already, by the caller), the judgement (:func:`settle`) and the movers' states and lidar rows
-    (:func:`snapshot`). The first mover (table row) the robot touches, or -1; and whether a
-    wanderer arrived (the next step must draw its goal first)."""
+    already, by the caller), the judgement (:func:`settle`), the movers' states and lidar rows
+    (:func:`snapshot`), and the groups' plans for the next step (from where everything is now:
+    the snapshot the next step would plan from, one compiled call a step saved). The first mover
+    (table row) the robot touches, or -1; and whether a wanderer arrived (the next step draws its
+    goal first)."""
     sync_robot(F, I, objects, outline, irsim, robot, x, y, yaw, v, w, stopped)
     if not advanced:
         advance(F, I, params, goals, routes, objects, segments, outlines, irsim, dt, neighbors)
     touched = settle(F, I, goals, robot, mode, circles, boxes, walls, rings, ring_index)
     snapshot(F, I, objects, moving, seen_circles, seen_boxes, states, circle_rows, box_rows)
+    if members.shape[0] > 0:
+        plan_groups(F, I, params, goals, objects, segments, orca_velocity, members, inside, dt, neighbors)
     wanders = False
     for m in range(F.shape[0]):
         wanders = wanders or (I[m, WANDER] == 1 and I[m, ARRIVED] == 1 and I[m, STOPPED] == 0)

@@ -145,15 +145,6 @@ class MoverTable:
     outlines: np.ndarray  # (N, 65, 2): each mover's polygon at the origin, IR-SIM worlds only (OUTLINE rows)
 
 
-def _route(motion: Motion, start: tuple[float, float]) -> list[tuple[float, float]]:
-    """The goal list a mover starts with, in IR-SIM's terms: ``back_and_forth`` is a loop over the
-    goals and back through them to the start."""
-    goals = [tuple(g) for g in motion.goals]
-    if motion.route == "back_and_forth" and goals:
-        goals = goals + goals[-2::-1] + [start] if len(goals) > 1 else goals
-    return goals
-
-
 _BEHAVIORS = {"dash": DASH, "rvo": RVO, "orca": ORCA, "sfm": SFM}
 _TARGETS = {"all": ALL, "robot": ROBOTS, "obstacle": OBSTACLES}
 
@@ -167,7 +158,7 @@ def mover_table(scenario: Scenario) -> MoverTable:
                 if type(o) in (CircleObstacle, BoxObstacle) and o.motion is not None]
     irsim = scenario.kind == "irsim"
     n = len(entries)
-    routes = [_route(motion, _position(scenario, obstacle)) for _, obstacle, motion in entries]
+    routes = [motion.route_from(_position(scenario, obstacle)) for _, obstacle, motion in entries]
     capacity = max([2] + [len(r) + 1 for r in routes])
     floats, ints, params = [], [], []
     goals, route_table = np.zeros((n, capacity, 2)), np.zeros((n, capacity, 2))
@@ -242,7 +233,7 @@ def _position(scenario: Scenario, obstacle) -> tuple[float, float]:
 
 def _objects(scenario: Scenario, irsim: bool) -> tuple[np.ndarray, np.ndarray]:
     """Every object as a disc (row 0 the robot; a line obstacle's row is unused, radius -1) and
-    the line obstacles' segments, in IR-SIM's object order."""
+    the line obstacles' segments, in IR-SIM's object order, the world's walls (if it has them) last."""
     objects = np.zeros((1 + len(scenario.obstacles), 6))
     robot = scenario.robot
     objects[0] = (*scenario.start[:2], 0.0, 0.0, robot.bounding_radius + EXTEND, ROBOT)
@@ -271,6 +262,11 @@ def _objects(scenario: Scenario, irsim: bool) -> tuple[np.ndarray, np.ndarray]:
     if shapes:
         discs = _irsim_discs(np.array(shapes, dtype=float))
         objects[rows, OX], objects[rows, OY], objects[rows, OR] = discs[:, 0], discs[:, 1], discs[:, 2] + EXTEND
+    world = scenario.world
+    if world.walls:  # lines movers keep off, last (where an IR-SIM export puts them: common.irsim_export)
+        x0, y0 = world.offset
+        x1, y1 = x0 + world.width, y0 + world.height
+        segments += [[x0, y0, x1, y0], [x1, y0, x1, y1], [x1, y1, x0, y1], [x0, y1, x0, y0]]
     return objects, np.array(segments, dtype=float).reshape(-1, 4)
 
 

@@ -1,0 +1,153 @@
+"""The dynamic window approach (Fox, Burgard and Thrun 1997; ROS's base_local_planner), among movers.
+
+Each step: the (v, w) the robot can reach within one control period (its acceleration limits
+about its odometry velocity, within v in [0, v_max] and w in [-w_max, w_max]) are sampled on a
+grid; each is rolled out as an arc for ``horizon`` seconds and checked against the static
+returns and against the tracked movers (:mod:`common.controllers.tracking`), each moved at its
+constant velocity to the rollout's time. Among the arcs that keep ``margin`` of clearance
+throughout, the best-scoring one is driven: heading to the goal at the arc's end, progress
+toward the goal, clearance and speed, weighted.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from common.controllers.go_to_goal import goal_polar
+from common.controllers.tracking import Scene, TrackingController
+from common.readings import Readings
+from common.scenario import LidarSpec, RobotProfile
+
+
+def wrap(angle):
+    """Angles (a float or an array) wrapped to [-pi, pi)."""
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def arcs(pose: tuple[float, float, float], v: np.ndarray, w: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """Poses (S, T, 3) along the arcs of constant (v[s], w[s]) from ``pose`` at ``times`` (T,)."""
+    x, y, yaw = pose
+    turn = w[:, None] * times[None]
+    chord = v[:, None] * times[None] * np.sinc(turn / (2.0 * math.pi))  # exact arc, straight when w = 0
+    along = yaw + 0.5 * turn
+    return np.stack([x + chord * np.cos(along), y + chord * np.sin(along), yaw + turn], axis=-1)
+
+
+def clearances(points: np.ndarray, scene: Scene, times: np.ndarray, radius: float) -> np.ndarray:
+    """(S, T) gap between the robot's disc at ``points`` (S, T, 2) and the nearest static return or
+    mover, each mover moved at constant velocity to ``times`` (T,)."""
+    gap = np.full(points.shape[:2], np.inf)
+    if len(scene.static):
+        offsets = points[:, :, None, :] - scene.static[None, None]
+        gap = np.hypot(offsets[..., 0], offsets[..., 1]).min(axis=2)
+    if len(scene.centres):
+        offsets = points[:, :, None, :] - scene.centres_at(times)[None]
+        to_movers = np.hypot(offsets[..., 0], offsets[..., 1]) - scene.radii
+        gap = np.minimum(gap, to_movers.min(axis=2))
+    return gap - radius
+
+
+class DynamicWindow(TrackingController):
+    """Sample the dynamic window, roll out arcs among predicted movers, drive the best admissible one.
+
+    Score of an admissible arc: heading_weight·(1 − |goal bearing error at its end|/pi) +
+    progress_weight·(distance to the goal gained at its end)/(v_max·horizon) +
+    clearance_weight·min(clearance, clearance_cap)/clearance_cap + velocity_weight·cos(e)·v/v_max,
+    with e the goal's heading error now.
+    Arcs that come within ``margin`` of a return or a predicted mover are not admissible; when none
+    is, the one that collides latest is driven (braking, turning in place or getting out of a
+    mover's way, whichever that is).
+
+    Args:
+        horizon: how far ahead each arc is checked, s (2.0).
+        rollout_step: seconds between checked poses along an arc (0.1).
+        v_samples, w_samples: grid points across the window in v and in w (7, 15).
+        accel_v, accel_w: the window's half-widths per second of control period, m/s², rad/s², used
+            where the robot's profile sets no (finite) limit (2.0, 4.0).
+        heading_weight, progress_weight, clearance_weight, velocity_weight: the score's weights (1.0, 1.0, 0.5, 0.2).
+        clearance_cap: clearance beyond which more is no better, m (1.0).
+        margin: the least clearance an admissible arc keeps, m (0.05).
+        track_movers: predict the tracked movers (True); False: every return is static (the bare DWA).
+        guide: steer for the first corner of a path round the static returns (True); False: for the goal.
+        stop_distance: within this many metres of the goal (by odometry), stand still; None (default):
+            half the scenario's goal threshold.
+        step_time: control period, s; None infers it from successive ``readings.time`` (None).
+    """
+
+    name = "dwa"
+
+    def __init__(self, horizon: float = 2.0, rollout_step: float = 0.1, v_samples: int = 7, w_samples: int = 15,
+                 accel_v: float = 2.0, accel_w: float = 4.0, heading_weight: float = 1.0, progress_weight: float = 1.0,
+                 clearance_weight: float = 0.5, velocity_weight: float = 0.2, clearance_cap: float = 1.0,
+                 margin: float = 0.05, track_movers: bool = True, guide: bool = True, stop_distance: float | None = None,
+                 step_time: float | None = None) -> None:
+        self.horizon, self.rollout_step = horizon, rollout_step
+        self.v_samples, self.w_samples = v_samples, w_samples
+        self.accel_v, self.accel_w = accel_v, accel_w
+        self.heading_weight, self.progress_weight = heading_weight, progress_weight
+        self.clearance_weight, self.velocity_weight = clearance_weight, velocity_weight
+        self.clearance_cap, self.margin = clearance_cap, margin
+        self.track_movers, self.guide = track_movers, guide
+        self.stop_distance = stop_distance
+        self.step_time = step_time
+
+    def bind(self, robot: RobotProfile, lidar: LidarSpec, goal_threshold: float = 0.3) -> None:
+        super().bind(robot, lidar, goal_threshold)
+        self.times = self.rollout_step * np.arange(1, max(1, round(self.horizon / self.rollout_step)) + 1)
+
+    def act(self, readings: Readings, goal: tuple[float, float]) -> tuple[float, float]:
+        distance, _, _ = goal_polar(readings, goal)
+        if self.arrived(distance, self.stop_distance):
+            return 0.0, 0.0
+        scene = self.scene(readings)
+        pose = readings.odometry.pose
+        target, rest = self.target(readings, scene, goal)
+        v, w = self.window(readings)
+        poses = arcs(pose, v, w, self.times)
+        gap = clearances(poses[..., :2], scene, self.times, self.robot.bounding_radius)
+        collides = gap < self.margin
+        admissible = ~collides.any(axis=1)
+        if admissible.any():
+            score = np.where(admissible, self.score(pose, poses, gap, v, np.asarray(goal, float), target, rest), -np.inf)
+            best = int(np.argmax(score))
+        else:  # the latest first collision, then the most clearance
+            first = collides.argmax(axis=1)
+            best = int(np.lexsort((gap.min(axis=1), first))[-1])
+        return self.clip(float(v[best]), float(w[best]))
+
+    def window(self, readings: Readings) -> tuple[np.ndarray, np.ndarray]:
+        """The sampled (v, w) pairs, flat: a grid over what one control period's acceleration reaches."""
+        dt = self.period(readings.time)
+        robot = self.robot
+        reach_v = (robot.accel_v if math.isfinite(robot.accel_v) else self.accel_v) * dt
+        reach_w = (robot.accel_w if math.isfinite(robot.accel_w) else self.accel_w) * dt
+        v0, w0 = readings.odometry.v, readings.odometry.w
+        v_low, v_high = max(0.0, min(v0 - reach_v, robot.v_max)), min(robot.v_max, max(v0 + reach_v, 0.0))
+        w_low, w_high = max(-robot.w_max, min(w0 - reach_w, robot.w_max)), min(robot.w_max, max(w0 + reach_w, -robot.w_max))
+        ws = np.linspace(w_low, w_high, self.w_samples)
+        if w_low < 0.0 < w_high:  # driving straight is always among the choices
+            ws = np.union1d(ws, [0.0])
+        v, w = np.meshgrid(np.linspace(v_low, v_high, self.v_samples), ws, indexing="ij")
+        return v.ravel(), w.ravel()
+
+    def score(self, pose: tuple[float, float, float], poses: np.ndarray, gap: np.ndarray, v: np.ndarray,
+              goal: np.ndarray, target: np.ndarray, rest: float) -> np.ndarray:
+        """(S,) the weighted score of each arc toward ``target``, ``rest`` metres of path short of
+        the goal (see the class)."""
+        to_target = target - poses[..., :2]
+        end = poses[:, -1]
+        # An arc that reaches the goal would stop there: it has done all it must, whatever follows.
+        reaches = self.arrived(np.hypot(*(goal - poses[..., :2]).transpose(2, 0, 1)), self.stop_distance).any(axis=1)
+        bearing = np.arctan2(to_target[:, -1, 1], to_target[:, -1, 0]) - end[:, 2]
+        heading = np.where(reaches, 1.0, 1.0 - np.abs(wrap(bearing)) / math.pi)
+        to_go = math.dist(pose[:2], target) + rest
+        left = np.where(reaches, 0.0, np.hypot(to_target[:, -1, 0], to_target[:, -1, 1]) + rest)
+        progress = (to_go - left) / (self.robot.v_max * self.times[-1])
+        clearance = np.minimum(gap.min(axis=1), self.clearance_cap) / self.clearance_cap
+        # Speed counts as far as it heads for the target now: a forward-only robot with the target
+        # behind turns on the spot rather than driving a wide loop.
+        toward = math.cos(wrap(math.atan2(target[1] - pose[1], target[0] - pose[0]) - pose[2]))
+        return (self.heading_weight * heading + self.progress_weight * progress
+                + self.clearance_weight * clearance + self.velocity_weight * toward * v / self.robot.v_max)

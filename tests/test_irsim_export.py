@@ -1,0 +1,66 @@
+"""A scenario written as an IR-SIM world runs in IR-SIM as it runs in flatland, movers included."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import yaml
+
+from common.errors import ConfigError
+from common.generators import generate
+from common.irsim_export import scenario_to_irsim
+from common.irsim_format import parse_irsim
+from common.motion.spec import Motion, Orca, Sfm
+from common.scenario import CircleObstacle
+from tests.conftest import optional
+
+
+def fixed_routes(scenario, count: int = 8):
+    """A crowd whose people each plan alone and walk back and forth to their first goal (a
+    wanderer's next goals are drawn by each simulator from its own generator)."""
+    people = []
+    for person in scenario.movers[:count]:
+        motion = person.motion.model_copy(update={"group": None, "wander": None, "route": "back_and_forth"})
+        people.append(person.model_copy(update={"motion": motion}))
+    return scenario.model_copy(update={"obstacles": [*scenario.static_obstacles, *people]})
+
+
+def test_movers_read_back_from_their_irsim_file(tmp_path):
+    scenario = fixed_routes(generate("crowd", 2, 0.5, "eval", behavior="sfm"))
+    back = parse_irsim(scenario_to_irsim(scenario), source=tmp_path / "w.yaml")
+    ours, theirs = scenario.movers, back.movers
+    assert [(p.x, p.y, p.radius) for p in ours] == [(p.x, p.y, p.radius) for p in theirs]
+    for mine, read in zip(ours, theirs):
+        assert read.motion.behavior == mine.motion.behavior and read.motion.vel_max == mine.motion.vel_max
+        assert read.motion.route_from((read.x, read.y)) == mine.motion.route_from((mine.x, mine.y))
+
+
+@pytest.mark.slow
+def test_an_exported_crowd_moves_in_irsim_as_in_flatland(tmp_path):
+    irsim = optional("irsim")
+    import flatland
+
+    path = tmp_path / "crowd.yaml"
+    path.write_text(yaml.safe_dump(scenario_to_irsim(fixed_routes(generate("crowd", 2, 0.5, "eval", behavior="sfm")))))
+    world, env = flatland.load_world(path), irsim.make(str(path), display=False, log_level="ERROR")
+    world.reset()
+    try:
+        for k in range(100):
+            ours = world.step(0.3, 0.2)
+            env.step([0.3, 0.2])
+            theirs = np.array([obj.state[:2, 0] for obj in env.objects if obj.role == "obstacle" and not obj.static])
+            np.testing.assert_allclose(ours.movers.rows[:, :2], theirs, rtol=0, atol=1e-9, err_msg=f"step {k}")
+    finally:
+        env.end(0)
+
+
+def test_what_irsim_cannot_say_is_one_line():
+    def person(behavior, reacts=False, speed=1.0):
+        return CircleObstacle(x=5.0, y=5.0, radius=0.2, motion=Motion(behavior=behavior, goals=[(6.0, 5.0)], group="g",
+                                                                      vel_max=(speed, speed), reacts_to_robot=reacts))
+
+    scenario = generate("open", 0)
+    with pytest.raises(ConfigError, match="IR-SIM's ORCA group sees only its members"):
+        scenario_to_irsim(scenario.model_copy(update={"obstacles": [person(Orca(), reacts=True)]}))
+    with pytest.raises(ConfigError, match="IR-SIM's group behaviour has one set of parameters"):
+        scenario_to_irsim(scenario.model_copy(update={"obstacles": [person(Sfm(vmax=1.0)), person(Sfm(vmax=2.0))]}))
