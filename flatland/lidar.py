@@ -84,12 +84,34 @@ def cast_scan(ox, oy, a0, delta, circles, boxes, segments, range_max, out):
     """Fill ``out`` (n beams at world angles a0 + k * delta) with the distance from (ox, oy) to the
     first circle (rows x, y, r), box (rows x, y, cos yaw, sin yaw, half length, half width) or
     segment (rows x1, y1, x2, y2), or ``range_max`` where nothing is nearer."""
+    dirs = _start_scan(a0, delta, range_max, out)
+    _cast(ox, oy, a0, delta, circles, boxes, segments, range_max, dirs, out)
+
+
+@kernel
+def cast_scan_among(ox, oy, a0, delta, circles, boxes, segments, more_circles, more_boxes, range_max, out):
+    """:func:`cast_scan` among two sets of circles and boxes (the static ones and the movers, without
+    joining their tables every step)."""
+    dirs = _start_scan(a0, delta, range_max, out)
+    _cast(ox, oy, a0, delta, circles, boxes, segments, range_max, dirs, out)
+    _cast(ox, oy, a0, delta, more_circles, more_boxes, segments[:0], range_max, dirs, out)
+
+
+@kernel(inline="always")
+def _start_scan(a0, delta, range_max, out):
     n = out.shape[0]
     dirs = np.empty((n, 2))
     for k in range(n):
         dirs[k, 0] = math.cos(a0 + k * delta)
         dirs[k, 1] = math.sin(a0 + k * delta)
         out[k] = range_max
+    return dirs
+
+
+@kernel(inline="always")
+def _cast(ox, oy, a0, delta, circles, boxes, segments, range_max, dirs, out):
+    """Shorten ``out``'s ranges to the circles, boxes and segments the beams ``dirs`` hit first."""
+    n = out.shape[0]
     bounds = np.empty((3, 2), dtype=np.int64)
     for i in range(circles.shape[0]):
         cx, cy, r = circles[i, 0], circles[i, 1], circles[i, 2]
@@ -154,12 +176,12 @@ class Lidar:
         ``boxes`` (rows as the constructor's) are seen too: the movers, where they are now."""
         ox, oy = self.origin(x, y, yaw)
         ranges = np.empty(self.spec.beams)
-        if circles is not None:
-            circles, boxes = np.concatenate((self.circles, circles)), np.concatenate((self.boxes, boxes))
+        if circles is None:
+            cast_scan(ox, oy, yaw + self.first_beam, self.beam_step, self.circles, self.boxes, self.segments,
+                      self.spec.range_max, ranges)
         else:
-            circles, boxes = self.circles, self.boxes
-        cast_scan(ox, oy, yaw + self.first_beam, self.beam_step, circles, boxes, self.segments, self.spec.range_max,
-                  ranges)
+            cast_scan_among(ox, oy, yaw + self.first_beam, self.beam_step, self.circles, self.boxes, self.segments,
+                            circles, boxes, self.spec.range_max, ranges)
         return self.finish(ranges)
 
     def finish(self, ranges: np.ndarray) -> np.ndarray:

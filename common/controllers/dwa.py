@@ -17,6 +17,7 @@ import numpy as np
 
 from common.controllers.go_to_goal import goal_polar
 from common.controllers.tracking import Scene, TrackingController
+from common.controllers.waypoint import Path
 from common.readings import Readings
 from common.scenario import LidarSpec, RobotProfile
 
@@ -69,6 +70,7 @@ class DynamicWindow(TrackingController):
         heading_weight, progress_weight, clearance_weight, velocity_weight: the score's weights (1.0, 1.0, 0.5, 0.2).
         clearance_cap: clearance beyond which more is no better, m (1.0).
         margin: the least clearance an admissible arc keeps, m (0.05).
+        lookahead: the heading term aims at the path this far beyond an arc's end, m (1.0).
         track_movers: predict the tracked movers (True); False: every return is static (the bare DWA).
         guide: steer for the first corner of a path round the static returns (True); False: for the goal.
         stop_distance: within this many metres of the goal (by odometry), stand still; None (default):
@@ -81,14 +83,15 @@ class DynamicWindow(TrackingController):
     def __init__(self, horizon: float = 2.0, rollout_step: float = 0.1, v_samples: int = 7, w_samples: int = 15,
                  accel_v: float = 2.0, accel_w: float = 4.0, heading_weight: float = 1.0, progress_weight: float = 1.0,
                  clearance_weight: float = 0.5, velocity_weight: float = 0.2, clearance_cap: float = 1.0,
-                 margin: float = 0.05, track_movers: bool = True, guide: bool = True, stop_distance: float | None = None,
+                 margin: float = 0.05, lookahead: float = 1.0, track_movers: bool = True, guide: bool = True,
+                 stop_distance: float | None = None,
                  step_time: float | None = None) -> None:
         self.horizon, self.rollout_step = horizon, rollout_step
         self.v_samples, self.w_samples = v_samples, w_samples
         self.accel_v, self.accel_w = accel_v, accel_w
         self.heading_weight, self.progress_weight = heading_weight, progress_weight
         self.clearance_weight, self.velocity_weight = clearance_weight, velocity_weight
-        self.clearance_cap, self.margin = clearance_cap, margin
+        self.clearance_cap, self.margin, self.lookahead = clearance_cap, margin, lookahead
         self.track_movers, self.guide = track_movers, guide
         self.stop_distance = stop_distance
         self.step_time = step_time
@@ -103,14 +106,14 @@ class DynamicWindow(TrackingController):
             return 0.0, 0.0
         scene = self.scene(readings)
         pose = readings.odometry.pose
-        target, rest = self.target(readings, scene, goal)
+        path = self.path(readings, scene, goal)
         v, w = self.window(readings)
         poses = arcs(pose, v, w, self.times)
         gap = clearances(poses[..., :2], scene, self.times, self.robot.bounding_radius)
         collides = gap < self.margin
         admissible = ~collides.any(axis=1)
         if admissible.any():
-            score = np.where(admissible, self.score(pose, poses, gap, v, np.asarray(goal, float), target, rest), -np.inf)
+            score = np.where(admissible, self.score(pose, poses, gap, v, np.asarray(goal, float), path), -np.inf)
             best = int(np.argmax(score))
         else:  # the latest first collision, then the most clearance
             first = collides.argmax(axis=1)
@@ -133,21 +136,20 @@ class DynamicWindow(TrackingController):
         return v.ravel(), w.ravel()
 
     def score(self, pose: tuple[float, float, float], poses: np.ndarray, gap: np.ndarray, v: np.ndarray,
-              goal: np.ndarray, target: np.ndarray, rest: float) -> np.ndarray:
-        """(S,) the weighted score of each arc toward ``target``, ``rest`` metres of path short of
-        the goal (see the class)."""
-        to_target = target - poses[..., :2]
-        end = poses[:, -1]
+              goal: np.ndarray, path: Path) -> np.ndarray:
+        """(S,) the weighted score of each arc along ``path`` (see the class)."""
+        # Cost to go from a point: the path left beyond its projection, plus its distance off the path.
+        along, off = path.locate(np.vstack([pose[:2], poses[:, -1, :2]]))
+        cost = path.length - along + off
         # An arc that reaches the goal would stop there: it has done all it must, whatever follows.
         reaches = self.arrived(np.hypot(*(goal - poses[..., :2]).transpose(2, 0, 1)), self.stop_distance).any(axis=1)
-        bearing = np.arctan2(to_target[:, -1, 1], to_target[:, -1, 0]) - end[:, 2]
-        heading = np.where(reaches, 1.0, 1.0 - np.abs(wrap(bearing)) / math.pi)
-        to_go = math.dist(pose[:2], target) + rest
-        left = np.where(reaches, 0.0, np.hypot(to_target[:, -1, 0], to_target[:, -1, 1]) + rest)
-        progress = (to_go - left) / (self.robot.v_max * self.times[-1])
+        progress = (cost[0] - np.where(reaches, 0.0, cost[1:])) / (self.robot.v_max * self.times[-1])
+        carrot = path.ahead(along, self.lookahead) - np.vstack([pose[:2], poses[:, -1, :2]])
+        error = wrap(np.arctan2(carrot[:, 1], carrot[:, 0]) - np.r_[pose[2], poses[:, -1, 2]])
+        heading = np.where(reaches, 1.0, 1.0 - np.abs(error[1:]) / math.pi)
         clearance = np.minimum(gap.min(axis=1), self.clearance_cap) / self.clearance_cap
-        # Speed counts as far as it heads for the target now: a forward-only robot with the target
+        # Speed counts as far as it heads along the path now: a forward-only robot with the path
         # behind turns on the spot rather than driving a wide loop.
-        toward = math.cos(wrap(math.atan2(target[1] - pose[1], target[0] - pose[0]) - pose[2]))
+        toward = math.cos(error[0])
         return (self.heading_weight * heading + self.progress_weight * progress
                 + self.clearance_weight * clearance + self.velocity_weight * toward * v / self.robot.v_max)

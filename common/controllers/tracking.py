@@ -41,7 +41,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from common.controllers.base import Controller, LidarGeometry
-from common.controllers.waypoint import Guide
+from common.controllers.waypoint import Guide, Path
 from common.readings import Readings
 from common.scenario import LidarSpec, RobotProfile
 
@@ -261,8 +261,8 @@ class ScanTracker:
 
 class TrackingController(Controller):
     """A controller that sees movers through a :class:`ScanTracker` (with ``track_movers`` False,
-    every return counts as static) and steers for a :class:`~common.controllers.waypoint.Guide`'s
-    target (with ``guide`` False, for the goal), both started afresh every episode; it knows its
+    every return counts as static) and steers along a :class:`~common.controllers.waypoint.Guide`'s
+    path (with ``guide`` False, straight for the goal), both started afresh every episode; it knows its
     control period."""
 
     track_movers: bool
@@ -289,11 +289,11 @@ class TrackingController(Controller):
         static = self.lidar.returns_world_frame(readings.lidar, readings.odometry.pose)
         return Scene(static, np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0))
 
-    def target(self, readings: Readings, scene: Scene, goal: tuple[float, float]) -> tuple[np.ndarray, float]:
-        """(where to steer, metres of path from there on to the goal)."""
+    def path(self, readings: Readings, scene: Scene, goal: tuple[float, float]) -> Path:
+        """The path to steer along: round the static returns, or straight to the goal."""
         if not self.guide:
-            return np.asarray(goal, float), 0.0
-        return self.planner.target(readings.lidar, readings.odometry.pose, scene.static, np.asarray(goal, float))
+            return Path(np.array([readings.odometry.pose[:2], goal], float))
+        return self.planner.path(readings.lidar, readings.odometry.pose, scene.static, np.asarray(goal, float))
 
     def period(self, time: float) -> float:
         """The control period: ``step_time`` if given, else the time since the last call."""

@@ -90,7 +90,8 @@ class VelocityObstacle(TrackingController):
         neighbor_distance: returns and movers further than this from the robot's edge are ignored, m (3.0).
         speed_samples, direction_samples: the candidate velocities' polar grid (5, 36), plus the
             preferred velocity and standing still.
-        k_linear: preferred speed per metre to the goal, 1/s (1.0), up to v_max.
+        lookahead: the preferred velocity aims at the path this far beyond the robot, m (0.8).
+        k_linear: preferred speed per metre of path to the goal, 1/s (1.0), up to v_max.
         k_angular: turning gain on the heading error, 1/s (2.0).
         turn_in_place: heading error beyond which the robot turns on the spot, rad (pi/3).
         track_movers: estimate movers' velocities (True); False: every return is static.
@@ -104,14 +105,15 @@ class VelocityObstacle(TrackingController):
 
     def __init__(self, time_horizon: float = 2.0, static_horizon: float = 1.0, responsibility: float = 1.0,
                  margin: float = 0.1, neighbor_distance: float = 3.0, speed_samples: int = 5,
-                 direction_samples: int = 36, k_linear: float = 1.0, k_angular: float = 2.0,
+                 direction_samples: int = 36, lookahead: float = 0.8, k_linear: float = 1.0, k_angular: float = 2.0,
                  turn_in_place: float = math.pi / 3, track_movers: bool = True, guide: bool = True,
                  stop_distance: float | None = None,
                  step_time: float | None = None) -> None:
         self.time_horizon, self.static_horizon = time_horizon, static_horizon
         self.responsibility, self.margin, self.neighbor_distance = responsibility, margin, neighbor_distance
         self.speed_samples, self.direction_samples = speed_samples, direction_samples
-        self.k_linear, self.k_angular, self.turn_in_place = k_linear, k_angular, turn_in_place
+        self.lookahead, self.k_linear = lookahead, k_linear
+        self.k_angular, self.turn_in_place = k_angular, turn_in_place
         self.track_movers, self.guide = track_movers, guide
         self.stop_distance = stop_distance
         self.step_time = step_time
@@ -122,11 +124,11 @@ class VelocityObstacle(TrackingController):
             return 0.0, 0.0
         scene = self.scene(readings)
         x, y, yaw = readings.odometry.pose
-        target, rest = self.target(readings, scene, goal)
-        heading = target - np.array([x, y])
-        ahead = float(np.hypot(*heading))
-        speed = min(self.robot.v_max, self.k_linear * (ahead + rest))
-        preferred = speed * heading / max(ahead, 1e-9)
+        path = self.path(readings, scene, goal)
+        along, off = path.locate(np.array([[x, y]]))
+        heading = path.ahead(along, self.lookahead)[0] - np.array([x, y])
+        speed = min(self.robot.v_max, self.k_linear * float(path.length - along[0] + off[0]))
+        preferred = speed * heading / max(float(np.hypot(*heading)), 1e-9)
         velocity = readings.odometry.v * np.array([math.cos(yaw), math.sin(yaw)])
         # Obstacles: movers at their velocities, then static returns (zero radius, zero velocity).
         centres = np.vstack([scene.centres, scene.static]) - np.array([x, y])

@@ -29,11 +29,10 @@ class Guide:
         lidar: the beams' geometry.
         inflation: the grid's inflation, m: the robot's radius and a clearance.
         resolution: cell side, m (0.1: finer than the narrowest gaps worth taking).
-        reach: the target is the first corner at least this far, m (0.5).
     """
 
-    def __init__(self, lidar: LidarGeometry, inflation: float, resolution: float = 0.1, reach: float = 0.5) -> None:
-        self.lidar, self.inflation, self.resolution, self.reach = lidar, inflation, resolution, reach
+    def __init__(self, lidar: LidarGeometry, inflation: float, resolution: float = 0.1) -> None:
+        self.lidar, self.inflation, self.resolution = lidar, inflation, resolution
         self.planner = AStar()
         self.reset()
 
@@ -107,9 +106,13 @@ class Path:
         rows = np.arange(len(points))
         return self.along[nearest] + t[rows, nearest] * self.lengths[nearest], gaps[rows, nearest]
 
-    def at(self, s: np.ndarray) -> np.ndarray:
-        """Points (M, 2) at arc lengths ``s`` (M,), held at the ends."""
-        return np.column_stack([np.interp(s, self.along, self.points[:, 0]), np.interp(s, self.along, self.points[:, 1])])
+    def ahead(self, s: np.ndarray, lookahead: float, reach: float = 0.3) -> np.ndarray:
+        """Points (M, 2) ``lookahead`` beyond arc lengths ``s`` (M,), but not past the first corner
+        more than ``reach`` ahead: the corner is in sight, what lies beyond it may not be."""
+        corner = self.along[np.minimum(np.searchsorted(self.along, s + reach, side="right"), len(self.along) - 1)]
+        ahead = np.minimum(s + lookahead, corner)
+        return np.column_stack([np.interp(ahead, self.along, self.points[:, 0]),
+                                np.interp(ahead, self.along, self.points[:, 1])])
 
     @property
     def length(self) -> float:
