@@ -8,7 +8,8 @@ each), and the robot too if it reacts. Difficulty sets the count (4 + 16 d: 12 a
 fastest walker (0.5 + 1.4 d m/s: 1.2 at 0.5); past 0.5 a growing share of the people do not see
 the robot (all of them at 1).
 
-``warehouse_moving``: two or three shelving rows (a pillar at each end) with aisles between them,
+``warehouse_moving``: two or three shelving rows (ending 1.2 m short of the walls, so aisles meet
+at both ends as well) with aisles between them,
 a cross-aisle through every row, and a few crates off the paths. Forklifts patrol stretches of
 the aisles back and forth, blind to the robot (``dash`` along their waypoints: they turn round in
 place at each end); people walk stretches of the cross-aisle back and forth (social force, or
@@ -220,7 +221,6 @@ def warehouse_moving(template: Scenario, rng: np.random.Generator, difficulty: f
         for a, b in ((1.2, cross - 0.5 * gap), (cross + 0.5 * gap, width - 1.2)):
             if b - a > 0.6:
                 boxes.append((0.5 * (a + b), y, 0.5 * (b - a), 0.3, 1.8))
-        boxes += [(0.6, y, 0.15, 0.15, 3.0), (width - 0.6, y, 0.15, 0.15, 3.0)]  # a pillar at each row's end
     table = np.array(boxes)
     inner = np.array([MARGIN, MARGIN, width - MARGIN, height - MARGIN])
     ends = _ends(rng, inner, table[:, :4], aisles, cross, 5.0, template.robot.bounding_radius + 0.3)
