@@ -13,8 +13,9 @@ at both ends as well) with aisles between them,
 a cross-aisle through every row, and a few crates off the paths. Forklifts patrol stretches of
 the aisles back and forth, blind to the robot (``dash`` along their waypoints: they turn round in
 place at each end); people walk stretches of the cross-aisle back and forth (social force, or
-ORCA, seeing the robot). Difficulty sets the forklifts (1 + 2 d, one per aisle at most) and the
-people (2 + 4 d). The robot's start and goal lie off the aisles' centre lines; the shelves, the
+ORCA). Difficulty sets the forklifts (1 + 2 d, one per aisle at most, at 0.4 to 0.4 + 1.2 d m/s)
+and the people (2 + 4 d, at 0.5 to 0.5 + 1.4 d m/s, past 0.5 a growing share blind to the robot,
+as in crowds). The robot's start and goal lie off the aisles' centre lines; the shelves, the
 cross-aisle and the crates' gaps leave the goal reachable by construction (a test checks it).
 
 Options (a suite's variants): ``reacting`` (True or False: every person sees the robot, or none)
@@ -37,7 +38,7 @@ from common.scenario import BoxObstacle, CircleObstacle, Obstacle, Scenario, Seg
 
 PERSON_RADIUS = (0.2, 0.3)  # m: shoulders of 0.4 to 0.6 m
 FORKLIFT = (1.0, 0.6)  # m: a pallet truck's footprint, length x width
-FORKLIFT_SPEED = (0.4, 1.0)  # m/s
+FORKLIFT_SPEED = (0.4, 1.2)  # m/s: from 0.4 to 0.4 + 1.2 d (1 at difficulty 0.5)
 MARGIN = 0.5  # m: people and patrols keep this far inside the world's walls
 CLEAR_OF_ROBOT = 1.0  # m: between a mover's start (or a crate) and the robot's start and goal
 OFF_PATHS = 0.9  # m: from a warehouse's start and goal to the lines forklifts and people move along
@@ -237,20 +238,24 @@ def warehouse_moving(template: Scenario, rng: np.random.Generator, difficulty: f
         if stretch is None:
             return None
         a, b = frame.point(stretch[0], float(aisles[k])), frame.point(stretch[1], float(aisles[k]))
-        speed = float(rng.uniform(*FORKLIFT_SPEED))
+        speed = float(rng.uniform(FORKLIFT_SPEED[0], FORKLIFT_SPEED[0] + FORKLIFT_SPEED[1] * difficulty))
         motion = Motion(behavior=Dash(angle_tolerance=0.05), goals=[b], route="back_and_forth", kinematics="diff",
                         vel_max=(speed, 1.5), vel_min=(0.0, -1.5), goal_threshold=0.2, reacts_to_robot=False,
                         label="forklift")
         movers.append(BoxObstacle(x=a[0], y=a[1], length=FORKLIFT[0], width=FORKLIFT[1],
                                   yaw=math.atan2(b[1] - a[1], b[0] - a[0]), height=2.0, motion=motion))
     kind = behavior or "sfm"
+    unaware = max(0.0, 2.0 * difficulty - 1.0)  # the share of people who do not see the robot, as in crowds
+    fastest = crowd_size(difficulty)[1]
     for _ in range(2 + int(round(4 * difficulty))):
         stretch = _stretch(rng, 0.8, height - 0.8, 1.0, ends, lambda v: (cross, v))
         if stretch is None:
             return None
         a, b = frame.point(cross, stretch[0]), frame.point(cross, stretch[1])
-        sees = True if reacting is None else reacting
-        movers.append(_person(a[0], a[1], float(rng.uniform(*PERSON_RADIUS)), float(rng.uniform(0.5, 1.2)), kind, sees,
+        radius, speed = float(rng.uniform(*PERSON_RADIUS)), float(rng.uniform(0.5, max(fastest, 0.5)))
+        # Drawn only where someone may be blind, so the layouts of difficulty 0.5 and below keep their draws.
+        sees = (unaware == 0.0 or rng.random() >= unaware) if reacting is None else reacting
+        movers.append(_person(a[0], a[1], radius, speed, kind, sees,
                               [b], "back_and_forth", None, "people"))
     start, goal = frame.point(*ends[0]), frame.point(*ends[1])
     return (*start, float(rng.uniform(-math.pi, math.pi))), goal, [*statics, *movers]

@@ -82,7 +82,7 @@ EDGE_DIGESTS = {
     "warehouse": ("6790129ec960dd0f", "1c8057ebaa79ed0f", "17bf7dd8d265cc77"),
     "trap": ("3e84e209176d1e51", "245e0cf15e4c4755", "b318b182e07cd049"),
     "crowd": ("0f7b32ccc6fe54de", "ee14fee09a3ff416", "b85f9b7586a0b6f0"),
-    "warehouse_moving": ("c5f2f98c756c811d", "2a35a7a89ac6f5cd", "cdfbe44523051d5d"),
+    "warehouse_moving": ("4c2f11c23f26b710", "015117d816ff1e95", "cdfbe44523051d5d"),
 }
 
 
