@@ -14,6 +14,7 @@ knob               meaning                                                  flat
 ``robot``          the robot profile: a name (``default``, ``physics3d``)    scenario's ``physics3d``
                    or a mapping of :class:`RobotProfile` fields
 ``lidar_noise``    σ of the Gaussian noise on each lidar return, m           scenario's 0.01
+``lidar_beams``    beams of the lidar, over its angular range               scenario's scenario's
 ``odometry_noise`` relative σ of each wheel's measured rotation              scenario's 0.01
 ``action_delay``   control steps a command arrives late, or [lo, hi]: a      0          0
                    whole number of steps drawn per episode
@@ -90,6 +91,7 @@ class Conditions(BaseModel):
 
     robot: str | dict[str, Any] | None = None
     lidar_noise: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
+    lidar_beams: Annotated[int, Field(ge=1, le=4096)] | None = None  # LidarSpec.beams's bounds
     odometry_noise: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
     action_delay: Steps | tuple[Steps, Steps] | None = None
     motor_scale: Range | None = None
@@ -153,7 +155,7 @@ class Conditions(BaseModel):
         return robot_profile(self.robot) if self.robot is not None else None
 
     def scenario(self, scenario: Scenario) -> Scenario:
-        """``scenario`` with this robot and these sensor noises (the knobs a scenario holds)."""
+        """``scenario`` with this robot and these sensors (the knobs a scenario holds)."""
         update: dict[str, Any] = {}
         robot = self.profile or scenario.robot
         if self.odometry_noise is not None and self.odometry_noise != robot.encoder_noise:
@@ -165,8 +167,13 @@ class Conditions(BaseModel):
                                   f"{world.width:g} x {world.height:g} m world of {scenario.name}; allowed: a robot "
                                   "narrower than its world")
             update["robot"] = robot
+        lidar = {}
         if self.lidar_noise is not None and self.lidar_noise != scenario.lidar.noise_std:
-            update["lidar"] = scenario.lidar.model_copy(update={"noise_std": self.lidar_noise})
+            lidar["noise_std"] = self.lidar_noise
+        if self.lidar_beams is not None and self.lidar_beams != scenario.lidar.beams:
+            lidar["beams"] = self.lidar_beams
+        if lidar:
+            update["lidar"] = scenario.lidar.model_copy(update=lidar)
         return scenario.model_copy(update=update) if update else scenario
 
     @property

@@ -66,6 +66,18 @@ def test_lidar_noise_has_the_asked_spread_and_replays_under_a_seed():
     assert np.array_equal(noisy, again)
 
 
+@pytest.mark.parametrize("tier", ["flatland", "physics3d"])
+def test_lidar_beams_sets_the_scan_of_either_tier_and_keeps_the_noise(tier):
+    conditions = Conditions(lidar_beams=180, lidar_noise=0.02)
+    scenario = conditions.scenario(OPEN)
+    assert (scenario.lidar.beams, scenario.lidar.noise_std) == (180, 0.02)
+    world = make_world(tier, OPEN, seed=0, conditions=conditions)
+    try:
+        assert world.reset().lidar.shape == (180,)
+    finally:
+        getattr(world, "close", lambda: None)()
+
+
 def test_motor_scale_draws_a_gain_per_episode_within_its_range():
     world = make_world("flatland", OPEN, conditions=Conditions(motor_scale=(0.5, 1.5)))
     gains = []
