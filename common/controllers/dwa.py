@@ -4,9 +4,9 @@ Each step: the (v, w) the robot can reach within one control period (its acceler
 about its odometry velocity, within v in [0, v_max] and w in [-w_max, w_max]) are sampled on a
 grid; each is rolled out as an arc for ``horizon`` seconds and checked against the static
 returns and against the tracked movers (:mod:`common.controllers.tracking`), each moved at its
-constant velocity to the rollout's time. Among the arcs that keep ``margin`` of clearance
-throughout, the best-scoring one is driven: heading to the goal at the arc's end, progress
-toward the goal, clearance and speed, weighted.
+constant velocity to the rollout's time. Among the admissible arcs the best-scoring one is
+driven: progress along the guide's path (:mod:`common.controllers.waypoint`; as ROS's local
+planner follows a global plan), heading along it at the arc's end, clearance and speed, weighted.
 """
 
 from __future__ import annotations
@@ -16,14 +16,15 @@ import math
 import numpy as np
 
 from common.controllers.go_to_goal import goal_polar
-from common.controllers.tracking import Scene, TrackingController
+from common.controllers.local import LocalController
+from common.controllers.tracking import Scene
 from common.controllers.waypoint import Path
 from common.readings import Readings
 from common.scenario import LidarSpec, RobotProfile
 
 
-def wrap(angle):
-    """Angles (a float or an array) wrapped to [-pi, pi)."""
+def wrap(angle: np.ndarray) -> np.ndarray:
+    """Angles wrapped to [-pi, pi), elementwise."""
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
@@ -36,43 +37,61 @@ def arcs(pose: tuple[float, float, float], v: np.ndarray, w: np.ndarray, times: 
     return np.stack([x + chord * np.cos(along), y + chord * np.sin(along), yaw + turn], axis=-1)
 
 
-def clearances(points: np.ndarray, scene: Scene, times: np.ndarray, radius: float) -> np.ndarray:
-    """(S, T) gap between the robot's disc at ``points`` (S, T, 2) and the nearest static return or
-    mover, each mover moved at constant velocity to ``times`` (T,)."""
-    gap = np.full(points.shape[:2], np.inf)
+def first_contact(gaps: np.ndarray, margin: float, times: np.ndarray) -> np.ndarray:
+    """(S,) the first of ``times`` at which each row of ``gaps`` (S, T) falls below ``margin`` (inf if never)."""
+    close = gaps < margin
+    return np.where(close.any(axis=1), times[close.argmax(axis=1)], np.inf)
+
+
+def clearances(points: np.ndarray, scene: Scene, times: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """(S, T) gaps between the robot's disc at ``points`` (S, T, 2) and the nearest static return,
+    and the nearest mover moved at constant velocity to ``times`` (T,)."""
+    static = np.full(points.shape[:2], np.inf)
+    movers = np.full(points.shape[:2], np.inf)
     if len(scene.static):
         offsets = points[:, :, None, :] - scene.static[None, None]
-        gap = np.hypot(offsets[..., 0], offsets[..., 1]).min(axis=2)
+        static = np.hypot(offsets[..., 0], offsets[..., 1]).min(axis=2)
     if len(scene.centres):
         offsets = points[:, :, None, :] - scene.centres_at(times)[None]
-        to_movers = np.hypot(offsets[..., 0], offsets[..., 1]) - scene.radii
-        gap = np.minimum(gap, to_movers.min(axis=2))
-    return gap - radius
+        movers = (np.hypot(offsets[..., 0], offsets[..., 1]) - scene.radii).min(axis=2)
+    return static - radius, movers - radius
 
 
-class DynamicWindow(TrackingController):
+class DynamicWindow(LocalController):
     """Sample the dynamic window, roll out arcs among predicted movers, drive the best admissible one.
 
-    Score of an admissible arc: heading_weight·(1 − |goal bearing error at its end|/pi) +
-    progress_weight·(distance to the goal gained at its end)/(v_max·horizon) +
+    Score of an arc: progress_weight·(cost to go now − at its end)/(v_max·horizon), the cost to go
+    from a point being the path left beyond its projection plus its distance off the path (all
+    of it gained by an arc that reaches the goal) + heading_weight·(1 − |e_end|/pi), e_end the
+    heading error at its end toward the path ``lookahead`` further on +
     clearance_weight·min(clearance, clearance_cap)/clearance_cap + velocity_weight·cos(e)·v/v_max,
-    with e the goal's heading error now.
-    Arcs that come within ``margin`` of a return or a predicted mover are not admissible; when none
-    is, the one that collides latest is driven (braking, turning in place or getting out of a
-    mover's way, whichever that is).
+    e that heading error now (so a forward-only robot with its way behind turns on the spot rather
+    than driving a wide loop) − mover_weight·(1 − t/horizon), t when it first meets a predicted
+    mover (none: no penalty).
+
+    An arc that comes within ``margin`` of a static return is not admissible, nor is one that meets
+    a predicted mover within ``mover_horizon``: a later meeting is a risk the score weighs (the
+    mover may turn), not a certainty. When no arc is admissible, the one whose first contact comes
+    latest is driven among those clear of static returns (a wall will be there, a mover may turn),
+    the most clearance breaking ties: braking, turning in place or getting out of a mover's way,
+    whichever that is.
 
     Args:
         horizon: how far ahead each arc is checked, s (2.0).
         rollout_step: seconds between checked poses along an arc (0.1).
         v_samples, w_samples: grid points across the window in v and in w (7, 15).
-        accel_v, accel_w: the window's half-widths per second of control period, m/s², rad/s², used
-            where the robot's profile sets no (finite) limit (2.0, 4.0).
-        heading_weight, progress_weight, clearance_weight, velocity_weight: the score's weights (1.0, 1.0, 0.5, 0.2).
+        accel_v, accel_w: the window's half-widths per second of control period, m/s², rad/s², where
+            the robot's profile sets no finite limit (5.0, 10.0: at 0.1 s, half the speed range and
+            the whole turn range of the default robot, which can change both at once).
+        heading_weight, progress_weight, clearance_weight, velocity_weight: the score's weights
+            (0.3, 1.0, 0.5, 0.2).
         clearance_cap: clearance beyond which more is no better, m (1.0).
         margin: the least clearance an admissible arc keeps, m (0.05).
+        mover_horizon: an arc meeting a predicted mover sooner than this is not admissible, s (1.5).
+        mover_weight: the score's penalty for meeting one at once, falling to 0 at the horizon (1.0).
         lookahead: the heading term aims at the path this far beyond an arc's end, m (1.0).
         track_movers: predict the tracked movers (True); False: every return is static (the bare DWA).
-        guide: steer for the first corner of a path round the static returns (True); False: for the goal.
+        guide: follow a path round the static returns (True); False: the straight line to the goal.
         stop_distance: within this many metres of the goal (by odometry), stand still; None (default):
             half the scenario's goal threshold.
         step_time: control period, s; None infers it from successive ``readings.time`` (None).
@@ -81,17 +100,18 @@ class DynamicWindow(TrackingController):
     name = "dwa"
 
     def __init__(self, horizon: float = 2.0, rollout_step: float = 0.1, v_samples: int = 7, w_samples: int = 15,
-                 accel_v: float = 2.0, accel_w: float = 4.0, heading_weight: float = 1.0, progress_weight: float = 1.0,
+                 accel_v: float = 5.0, accel_w: float = 10.0, heading_weight: float = 0.3, progress_weight: float = 1.0,
                  clearance_weight: float = 0.5, velocity_weight: float = 0.2, clearance_cap: float = 1.0,
-                 margin: float = 0.05, lookahead: float = 1.0, track_movers: bool = True, guide: bool = True,
-                 stop_distance: float | None = None,
-                 step_time: float | None = None) -> None:
+                 margin: float = 0.05, mover_horizon: float = 1.5, mover_weight: float = 1.0,
+                 lookahead: float = 1.0, track_movers: bool = True, guide: bool = True,
+                 stop_distance: float | None = None, step_time: float | None = None) -> None:
         self.horizon, self.rollout_step = horizon, rollout_step
         self.v_samples, self.w_samples = v_samples, w_samples
         self.accel_v, self.accel_w = accel_v, accel_w
         self.heading_weight, self.progress_weight = heading_weight, progress_weight
         self.clearance_weight, self.velocity_weight = clearance_weight, velocity_weight
         self.clearance_cap, self.margin, self.lookahead = clearance_cap, margin, lookahead
+        self.mover_horizon, self.mover_weight = mover_horizon, mover_weight
         self.track_movers, self.guide = track_movers, guide
         self.stop_distance = stop_distance
         self.step_time = step_time
@@ -109,15 +129,17 @@ class DynamicWindow(TrackingController):
         path = self.path(readings, scene, goal)
         v, w = self.window(readings)
         poses = arcs(pose, v, w, self.times)
-        gap = clearances(poses[..., :2], scene, self.times, self.robot.bounding_radius)
-        collides = gap < self.margin
-        admissible = ~collides.any(axis=1)
+        static, movers = clearances(poses[..., :2], scene, self.times, self.robot.bounding_radius)
+        gap = np.minimum(static, movers)
+        meets_static = first_contact(static, self.margin, self.times)
+        meets_mover = first_contact(movers, self.margin, self.times)
+        score = self.score(pose, poses, gap, v, np.asarray(goal, float), path)
+        score -= self.mover_weight * np.clip(1.0 - meets_mover / self.times[-1], 0.0, 1.0)
+        admissible = np.isinf(meets_static) & (meets_mover > self.mover_horizon)
         if admissible.any():
-            score = np.where(admissible, self.score(pose, poses, gap, v, np.asarray(goal, float), path), -np.inf)
-            best = int(np.argmax(score))
-        else:  # the latest first collision, then the most clearance
-            first = collides.argmax(axis=1)
-            best = int(np.lexsort((gap.min(axis=1), first))[-1])
+            best = int(np.argmax(np.where(admissible, score, -np.inf)))
+        else:  # clear of static returns (a wall is certain, a mover's course not), the latest contact, the most clearance
+            best = int(np.lexsort((gap.min(axis=1), np.minimum(meets_static, meets_mover), np.isinf(meets_static)))[-1])
         return self.clip(float(v[best]), float(w[best]))
 
     def window(self, readings: Readings) -> tuple[np.ndarray, np.ndarray]:
@@ -148,8 +170,6 @@ class DynamicWindow(TrackingController):
         error = wrap(np.arctan2(carrot[:, 1], carrot[:, 0]) - np.r_[pose[2], poses[:, -1, 2]])
         heading = np.where(reaches, 1.0, 1.0 - np.abs(error[1:]) / math.pi)
         clearance = np.minimum(gap.min(axis=1), self.clearance_cap) / self.clearance_cap
-        # Speed counts as far as it heads along the path now: a forward-only robot with the path
-        # behind turns on the spot rather than driving a wide loop.
         toward = math.cos(error[0])
         return (self.heading_weight * heading + self.progress_weight * progress
                 + self.clearance_weight * clearance + self.velocity_weight * toward * v / self.robot.v_max)

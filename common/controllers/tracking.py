@@ -3,7 +3,7 @@
 Each step the returns are put in the world frame by the odometry pose and split into blobs: runs
 of consecutive beams whose returns lie within a gap of each other (``gap`` plus the beams'
 spacing at that range). A blob no wider than ``max_radius`` is a candidate mover, summarised by a
-disc (the centre of its returns and the farthest return from it, at least ``min_radius``: a blob
+disc (the mean of its returns and the farthest return from it, at least ``min_radius``: a blob
 narrower than that is a body's near side, so its centre is pushed back along the line of sight);
 a wider blob (a wall, a shelf) is static. Candidates are matched to the tracks of the previous
 step (an optimal assignment of nearest neighbours within ``gate`` of each track's prediction),
@@ -14,13 +14,16 @@ A blob that moves is not necessarily a mover. The beams turn with the robot, so 
 turns, the point where a beam meets a wall slides along the wall: a wall fragment (seen through
 a gap, or at a grazing angle, where the hits lie further apart than the gap) moves at up to the
 robot's speed, or range times turn rate. So a track counts as moving only with evidence that no
-static world gives: a return where a beam of an earlier scan (``lag`` seconds back) went through
-and saw further. A point sliding along a wall lies on the wall those beams hit; a person who
-stepped forward or sideways stands where they saw free space. Between two beams of the earlier
-scan the free range is the chord between their returns if they lie on one surface; across a
-jump in depth it is the nearer of the two, unless the point lies within ``lateral_tolerance`` of
-a beam (something could have hidden between them). Tracks without evidence within ``hold``
-seconds report zero velocity: their returns are static obstacles.
+static world gives: a return where the beams of an earlier scan (``lag`` seconds back) on either
+side of it went through and saw further. Where those two beams met one surface, the free range
+is the chord between their returns, so a point sliding along a wall, which lies on that chord,
+is no evidence, however far apart the returns; elsewhere it is the nearer of the two returns.
+A person who stepped forward or sideways stands where the earlier beams saw free space. Only a
+body narrower than the beams' spacing could have hidden between them, so the evidence is taken
+where the spacing is below ``min_width``, or anywhere for a blob already in sight, without a
+break, when the earlier scan was taken (it would have blocked one of its beams). A track with
+no evidence within ``hold`` seconds, or slower than ``min_speed``, reports no velocity: its
+returns are static obstacles.
 
 Limits: one scan carries no velocity: the filter needs a few scans to converge and the evidence
 ``lag`` seconds of motion; a mover that is occluded is lost (a new track when it reappears); a
@@ -40,10 +43,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from common.controllers.base import Controller, LidarGeometry
-from common.controllers.waypoint import Guide, Path
-from common.readings import Readings
-from common.scenario import LidarSpec, RobotProfile
+from common.controllers.base import LidarGeometry
 
 _FAR = 1e6  # the cost of a pairing beyond the gate: never chosen over a feasible one
 
@@ -95,6 +95,30 @@ def blobs(links: np.ndarray, hit: np.ndarray) -> list[np.ndarray]:
     return [run for run in np.split(order, starts[1:]) if hit[run[0]]]
 
 
+class _Tracks(NamedTuple):
+    """The tracks, one row each."""
+
+    position: np.ndarray  # (K, 2)
+    velocity: np.ndarray  # (K, 2)
+    radius: np.ndarray  # (K,)
+    misses: np.ndarray  # (K,) steps since last seen
+    hits: np.ndarray  # (K,) scans it was seen in
+    since: np.ndarray  # (K,) when its current unbroken run of sightings began, s
+    evidence: np.ndarray  # (K,) when it last gave evidence of motion, s
+
+    @classmethod
+    def fresh(cls, centres: np.ndarray, radii: np.ndarray, time: float) -> "_Tracks":
+        n = len(centres)
+        return cls(centres.reshape(-1, 2).copy(), np.zeros((n, 2)), radii.copy(), np.zeros(n, int), np.ones(n, int),
+                   np.full(n, time), np.full(n, -math.inf))
+
+    def take(self, rows: np.ndarray) -> "_Tracks":
+        return _Tracks(*(field[rows] for field in self))
+
+    def join(self, other: "_Tracks") -> "_Tracks":
+        return _Tracks(*(np.concatenate([a, b]) for a, b in zip(self, other)))
+
+
 class ScanTracker:
     """Blobs of each scan, tracked with velocities (see the module).
 
@@ -111,31 +135,29 @@ class ScanTracker:
         hold: how long evidence of motion lasts, s (1.0).
         tolerance: how much nearer than the reference's free range a return must be, m (0.1), plus
             half the beam spacing at its range where the reference's chord may cut a corner.
-        min_width: the narrowest body, m (0.3): where the reference's beams lie further apart than
-            this, a body could have hidden between them, so no evidence is taken there.
+        min_width: the narrowest body, m (0.45): where the reference's beams lie further apart than
+            this, a body could have hidden between them, so no evidence is taken there from a
+            track that was not already seen, without a break, when the reference was scanned.
         min_hits: scans a track needs before it may report a velocity (3).
+        min_speed: a track slower than this is static, m/s (0.2): what is left of a static
+            blob's jitter, not a person's walk.
     """
 
     def __init__(self, lidar: LidarGeometry, gap: float = 0.25, max_radius: float = 0.6, min_radius: float = 0.2,
                  gate: float = 0.5, alpha: float = 0.5, beta: float = 0.15, max_misses: int = 3,
                  max_speed: float = 2.5, lag: float = 0.5, hold: float = 1.0, tolerance: float = 0.1,
-                 min_width: float = 0.3, min_hits: int = 3) -> None:
+                 min_width: float = 0.45, min_hits: int = 3, min_speed: float = 0.2) -> None:
         self.lidar = lidar
         self.gap, self.max_radius, self.min_radius, self.gate = gap, max_radius, min_radius, gate
         self.alpha, self.beta, self.max_misses, self.max_speed = alpha, beta, max_misses, max_speed
         self.lag, self.hold, self.tolerance, self.min_width = lag, hold, tolerance, min_width
-        self.min_hits = min_hits
+        self.min_hits, self.min_speed = min_hits, min_speed
         self.spacing = lidar.spec.beam_spacing
         self.reset()
 
     def reset(self) -> None:
         """Forget every track and scan."""
-        self.positions = np.zeros((0, 2))
-        self.velocities = np.zeros((0, 2))
-        self.radii = np.zeros(0)
-        self.misses = np.zeros(0, int)
-        self.hits = np.zeros(0, int)
-        self.evidence = np.zeros(0)  # time of the latest evidence of motion
+        self.tracks = _Tracks.fresh(np.zeros((0, 2)), np.zeros(0), 0.0)
         self.history: deque[_Scan] = deque()
         self.time: float | None = None
 
@@ -150,20 +172,23 @@ class ScanTracker:
         radii = np.array([discs[k][1] for k in candidates])
         dt = 0.0 if self.time is None else time - self.time
         self.time = time
-        rows = self._associate(centres, radii, dt)
+        rows = self._associate(centres, radii, dt, time)
         reference = self._reference(time)
-        for k, row in zip(candidates, rows):
-            if reference is not None and self._seen_through(scan.points[runs[k]], reference).any():
-                self.evidence[row] = time
+        tracks = self.tracks
+        if reference is not None:
+            for k, row in zip(candidates, rows):
+                seen_then = time - tracks.since[row] >= self.lag
+                if self._seen_through(scan.points[runs[k]], reference, seen_then).any():
+                    tracks.evidence[row] = time
         self.history.append(scan)
-        moving = np.zeros(len(self.positions), bool)
-        moving[rows] = (self.hits[rows] >= self.min_hits) & (time - self.evidence[rows] <= self.hold)
-        moving_beams = [runs[k] for k, row in zip(candidates, rows) if moving[row]]
+        moving = np.zeros(len(tracks.position), bool)
+        moving[rows] = ((tracks.hits[rows] >= self.min_hits) & (time - tracks.evidence[rows] <= self.hold)
+                        & (np.hypot(*tracks.velocity[rows].T) >= self.min_speed))
         still = hit.copy()
-        if moving_beams:
-            still[np.concatenate(moving_beams)] = False
-        return Scene(scan.points[still], self.positions[moving].copy(), self.velocities[moving].copy(),
-                     self.radii[moving].copy())
+        for k, row in zip(candidates, rows):
+            still[runs[k]] = not moving[row]
+        movers = tracks.take(moving)
+        return Scene(scan.points[still], movers.position, movers.velocity, movers.radius)
 
     def _scan(self, ranges: np.ndarray, pose: tuple[float, float, float], time: float) -> _Scan:
         x, y, yaw = pose
@@ -177,7 +202,8 @@ class ScanTracker:
         return _Scan(time, origin, yaw, np.asarray(ranges, float), points, links)
 
     def _disc(self, points: np.ndarray, origin: np.ndarray) -> tuple[np.ndarray, float]:
-        """A blob's centre and radius; narrower than min_radius, its centre goes back along the line of sight."""
+        """A blob's centre and radius: its returns' mean and the farthest return from it; narrower
+        than ``min_radius``, its centre goes back along the line of sight (the blob is a body's near side)."""
         centre = points.mean(axis=0)
         radius = float(np.hypot(*(points - centre).T).max())
         if radius < self.min_radius:
@@ -186,41 +212,35 @@ class ScanTracker:
             radius = self.min_radius
         return centre, radius
 
-    def _associate(self, centres: np.ndarray, radii: np.ndarray, dt: float) -> list[int]:
+    def _associate(self, centres: np.ndarray, radii: np.ndarray, dt: float, time: float) -> list[int]:
         """Match the candidates to predicted tracks, filter, start and drop tracks; each candidate's track row."""
-        self.positions = self.positions + dt * self.velocities
+        t = self.tracks
+        t.position[:] += dt * t.velocity
         rows = [-1] * len(centres)
-        if len(self.positions) and len(centres):
-            cost = np.hypot(*(self.positions[:, None] - centres[None]).transpose(2, 0, 1))
+        if len(t.position) and len(centres):
+            cost = np.hypot(*(t.position[:, None] - centres[None]).transpose(2, 0, 1))
             pairs = zip(*linear_sum_assignment(np.where(cost <= self.gate, cost, _FAR)))
             for row, k in ((r, k) for r, k in pairs if cost[r, k] <= self.gate):
-                residual = centres[k] - self.positions[row]
-                self.positions[row] += self.alpha * residual
+                residual = centres[k] - t.position[row]
+                t.position[row] += self.alpha * residual
                 if dt > 0.0:
-                    self.velocities[row] += self.beta * residual / dt
-                speed = float(np.hypot(*self.velocities[row]))
+                    t.velocity[row] += self.beta * residual / dt
+                speed = float(np.hypot(*t.velocity[row]))
                 if speed > self.max_speed:  # a wrong pairing, most likely: believe no more than this
-                    self.velocities[row] *= self.max_speed / speed
-                self.radii[row], self.misses[row] = radii[k], -1
-                self.hits[row] += 1
+                    t.velocity[row] *= self.max_speed / speed
+                if t.misses[row] > 0:  # seen again after a break
+                    t.since[row] = time
+                t.radius[row], t.misses[row] = radii[k], -1
+                t.hits[row] += 1
                 rows[k] = row
-        self.misses += 1  # matched rows back to 0
-        new = [k for k, row in enumerate(rows) if row < 0]
-        keep = np.flatnonzero(self.misses <= self.max_misses)
+        t.misses[:] += 1  # matched rows back to 0
+        keep = np.flatnonzero(t.misses <= self.max_misses)
         renumber = {int(old): i for i, old in enumerate(keep)}
         rows = [renumber.get(row, -1) for row in rows]
-        self.positions, self.velocities = self.positions[keep], self.velocities[keep]
-        self.radii, self.misses, self.hits, self.evidence = (self.radii[keep], self.misses[keep], self.hits[keep],
-                                                             self.evidence[keep])
-        first = len(self.positions)
-        self.positions = np.vstack([self.positions, centres[new]])
-        self.velocities = np.vstack([self.velocities, np.zeros((len(new), 2))])
-        self.radii = np.concatenate([self.radii, radii[new]])
-        self.misses = np.concatenate([self.misses, np.zeros(len(new), int)])
-        self.hits = np.concatenate([self.hits, np.ones(len(new), int)])
-        self.evidence = np.concatenate([self.evidence, np.full(len(new), -math.inf)])
+        new = [k for k, row in enumerate(rows) if row < 0]
+        self.tracks = t.take(keep).join(_Tracks.fresh(centres[new], radii[new], time))
         for i, k in enumerate(new):
-            rows[k] = first + i
+            rows[k] = len(keep) + i
         return rows
 
     def _reference(self, time: float) -> _Scan | None:
@@ -229,8 +249,9 @@ class ScanTracker:
             self.history.popleft()
         return self.history[0] if self.history else None
 
-    def _seen_through(self, points: np.ndarray, reference: _Scan) -> np.ndarray:
-        """Which ``points`` lie where a beam of ``reference`` went through and saw further."""
+    def _seen_through(self, points: np.ndarray, reference: _Scan, seen_then: bool) -> np.ndarray:
+        """Which ``points`` lie where the beams of ``reference`` on either side went through and saw
+        further (``seen_then``: their blob was in sight when ``reference`` was scanned)."""
         spec, n = self.lidar.spec, len(reference.ranges)
         sight = points - reference.origin
         distance = np.hypot(*sight.T)
@@ -254,52 +275,7 @@ class ScanTracker:
         free = np.where(linked & (denominator != 0.0), crossing, nearer)
         # A chord may cut off a convex corner by up to about half the beams' spacing there.
         slack = self.tolerance + np.where(linked, 0.5 * self.spacing * distance, 0.0)
-        # Only where the beams lie closer together than any body is wide could nothing have hidden between them.
-        narrow = distance * self.spacing < self.min_width
+        # Only where the beams lie closer together than any body is wide could nothing have hidden
+        # between them; a body in sight then could not hide there either (it would have blocked a beam).
+        narrow = seen_then | (distance * self.spacing < self.min_width)
         return inside & narrow & (distance < free - slack)
-
-
-class TrackingController(Controller):
-    """A controller that sees movers through a :class:`ScanTracker` (with ``track_movers`` False,
-    every return counts as static) and steers along a :class:`~common.controllers.waypoint.Guide`'s
-    path (with ``guide`` False, straight for the goal), both started afresh every episode; it knows its
-    control period."""
-
-    track_movers: bool
-    guide: bool
-    margin: float
-    step_time: float | None
-    first_period = 0.1  # s: the control period assumed before two steps have shown it
-    guide_slack = 0.1  # m: the guide's path keeps this much more than ``margin`` from static returns
-
-    def bind(self, robot: RobotProfile, lidar: LidarSpec, goal_threshold: float = 0.3) -> None:
-        super().bind(robot, lidar, goal_threshold)
-        self.tracker = ScanTracker(self.lidar)
-        self.planner = Guide(self.lidar, robot.bounding_radius + self.margin + self.guide_slack)
-
-    def reset(self) -> None:
-        self.tracker.reset()
-        self.planner.reset()
-        self._previous_time: float | None = None
-
-    def scene(self, readings: Readings) -> Scene:
-        """What this step's scan shows, at the odometry pose."""
-        if self.track_movers:
-            return self.tracker.update(readings.lidar, readings.odometry.pose, readings.time)
-        static = self.lidar.returns_world_frame(readings.lidar, readings.odometry.pose)
-        return Scene(static, np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0))
-
-    def path(self, readings: Readings, scene: Scene, goal: tuple[float, float]) -> Path:
-        """The path to steer along: round the static returns, or straight to the goal."""
-        if not self.guide:
-            return Path(np.array([readings.odometry.pose[:2], goal], float))
-        return self.planner.path(readings.lidar, readings.odometry.pose, scene.static, np.asarray(goal, float))
-
-    def period(self, time: float) -> float:
-        """The control period: ``step_time`` if given, else the time since the last call."""
-        if self.step_time is not None:
-            return self.step_time
-        known = self._previous_time is not None and time > self._previous_time
-        dt = time - self._previous_time if known else self.first_period
-        self._previous_time = time
-        return dt

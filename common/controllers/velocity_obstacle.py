@@ -9,9 +9,11 @@ the half-plane bounded at the obstacle's nearest edge to the current velocity, s
 person who yields from one who does not, nor does a wall yield, and half (RVO2's reciprocal
 share, for agents that all run ORCA) leaves it in the way of anyone who does not. The velocity
 driven is the sampled one, in the speed disc, that satisfies every half-plane and lies nearest the
-preferred one (toward the goal at full speed, slower within a metre or so; with static returns
-in the way, toward a path's corner: :mod:`common.controllers.waypoint`); when none does, the one
-violating the half-planes least (RVO2's fallback). A heading controller turns that holonomic
+preferred one (at full speed, slower within a metre or so of the goal, toward a point ahead on
+the guide's path: the goal itself when nothing static stands in the way,
+:mod:`common.controllers.waypoint`); when none does, the one that keeps to the static returns'
+half-planes and violates the movers' least (RVO2's fallback, which relaxes agents' lines, never
+obstacles'). A heading controller turns that holonomic
 velocity into (v, w): it turns toward it, driving at its speed times the cosine of the heading
 error, and on the spot beyond ``turn_in_place``.
 """
@@ -23,7 +25,7 @@ import math
 import numpy as np
 
 from common.controllers.go_to_goal import goal_polar
-from common.controllers.tracking import TrackingController
+from common.controllers.local import LocalController
 from common.kinematics import wrap_angle
 from common.readings import Readings
 
@@ -63,22 +65,25 @@ def orca_half_planes(velocity: np.ndarray, offsets: np.ndarray, velocities: np.n
     return velocity + responsibility * u, directions
 
 
-def nearest_admissible(preferred: np.ndarray, points: np.ndarray, directions: np.ndarray,
+def nearest_admissible(preferred: np.ndarray, points: np.ndarray, directions: np.ndarray, hard: np.ndarray,
                        candidates: np.ndarray) -> np.ndarray:
-    """The candidate (C, 2) within every half-plane nearest ``preferred``; if none is, the one whose
-    worst violation is least."""
+    """The candidate (C, 2) within every half-plane nearest ``preferred``. If none is: of those
+    within the ``hard`` (L,) ones, the one whose worst violation of the others is least (RVO2
+    never relaxes an obstacle's line either); if none is within those, the least violating them."""
     # How far each candidate lies right of each line (positive: outside the half-plane).
     outside = (directions[None, :, 0] * (points[None, :, 1] - candidates[:, None, 1])
                - directions[None, :, 1] * (points[None, :, 0] - candidates[:, None, 0]))
-    worst = outside.max(axis=1) if len(points) else np.zeros(len(candidates))
-    admissible = worst <= 0.0
+    worst_hard = outside[:, hard].max(axis=1, initial=0.0)
+    worst_soft = outside[:, ~hard].max(axis=1, initial=0.0)
+    admissible = (worst_hard <= 0.0) & (worst_soft <= 0.0)
     if admissible.any():
-        miss = np.where(admissible, np.hypot(*(candidates - preferred).T), np.inf)
-        return candidates[int(np.argmin(miss))]
-    return candidates[int(np.argmin(worst))]
+        return candidates[int(np.argmin(np.where(admissible, np.hypot(*(candidates - preferred).T), np.inf)))]
+    if (worst_hard <= 0.0).any():
+        return candidates[int(np.argmin(np.where(worst_hard <= 0.0, worst_soft, np.inf)))]
+    return candidates[int(np.argmin(worst_hard))]
 
 
-class VelocityObstacle(TrackingController):
+class VelocityObstacle(LocalController):
     """ORCA among tracked movers and static returns, driven by a heading controller (see the module).
 
     Args:
@@ -95,7 +100,7 @@ class VelocityObstacle(TrackingController):
         k_angular: turning gain on the heading error, 1/s (2.0).
         turn_in_place: heading error beyond which the robot turns on the spot, rad (pi/3).
         track_movers: estimate movers' velocities (True); False: every return is static.
-        guide: prefer heading for the first corner of a path round the static returns (True); False: for the goal.
+        guide: prefer following a path round the static returns (True); False: the straight line to the goal.
         stop_distance: within this many metres of the goal (by odometry), stand still; None (default):
             half the scenario's goal threshold.
         step_time: control period, s; None infers it from successive ``readings.time`` (None).
@@ -107,8 +112,7 @@ class VelocityObstacle(TrackingController):
                  margin: float = 0.1, neighbor_distance: float = 3.0, speed_samples: int = 5,
                  direction_samples: int = 36, lookahead: float = 0.8, k_linear: float = 1.0, k_angular: float = 2.0,
                  turn_in_place: float = math.pi / 3, track_movers: bool = True, guide: bool = True,
-                 stop_distance: float | None = None,
-                 step_time: float | None = None) -> None:
+                 stop_distance: float | None = None, step_time: float | None = None) -> None:
         self.time_horizon, self.static_horizon = time_horizon, static_horizon
         self.responsibility, self.margin, self.neighbor_distance = responsibility, margin, neighbor_distance
         self.speed_samples, self.direction_samples = speed_samples, direction_samples
@@ -138,7 +142,8 @@ class VelocityObstacle(TrackingController):
         near = np.hypot(centres[:, 0], centres[:, 1]) - radii < self.neighbor_distance
         points, directions = orca_half_planes(velocity, centres[near], velocities[near], radii[near], horizons[near],
                                               self.period(readings.time), self.responsibility)
-        chosen = nearest_admissible(preferred, points, directions, self.candidates(preferred))
+        static = np.r_[np.zeros(len(scene.centres), bool), np.ones(len(scene.static), bool)][near]
+        chosen = nearest_admissible(preferred, points, directions, static, self.candidates(preferred))
         return self.clip(*self.steer(chosen, yaw))
 
     def candidates(self, preferred: np.ndarray) -> np.ndarray:
