@@ -200,6 +200,9 @@ SUITES: dict[str, Suite] = {
 # same people blind to it (the hard case).
 SUITES["crowd"] = Suite(name="crowd", kind="crowd", options=(("reacting", True),))
 SUITES["crowd_unaware"] = Suite(name="crowd_unaware", kind="crowd", options=(("reacting", False),))
+# The moving warehouse with every driver and person blind to the robot.
+SUITES["warehouse_moving_unaware"] = Suite(name="warehouse_moving_unaware", kind="warehouse_moving",
+                                           options=(("reacting", False),))
 
 
 def get_suite(name: str) -> Suite:

@@ -6,7 +6,8 @@ names (a ``back_and_forth`` route as the goal list a ``loop`` runs through; a wa
 ``range_low``/``range_high``, IR-SIM drawing its first goal itself), a group as one YAML group with
 its ``group_behavior``, a mover blind to the robot as ``target_roles: obstacle``. What IR-SIM cannot
 say is a one-line :class:`ConfigError`: members of a group whose parameters differ (IR-SIM's groups
-share theirs), and an ORCA group that sees the robot (IR-SIM's ORCA sees its group only).
+share theirs), an ORCA group that sees the robot (IR-SIM's ORCA sees its group only), and a
+``dash`` mover that yields to the robot (IR-SIM's never does).
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import math
 from typing import Any
 
 from common.errors import ConfigError
-from common.motion.spec import Motion, Orca
+from common.motion.spec import Dash, Motion, Orca
 from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario
 
 _ORIGIN = [0.0, 0.0, 0.0]
@@ -39,7 +40,7 @@ def _obstacle(obstacle) -> dict[str, Any]:
 def _behavior(motion: Motion) -> dict[str, Any]:
     """IR-SIM's behaviour mapping: the behaviour's parameters, its route and whom it avoids."""
     behavior = motion.behavior
-    values = behavior.model_dump(exclude={"name"}, exclude_none=True)
+    values = behavior.model_dump(exclude={"name", "yield_distance"}, exclude_none=True)
     if isinstance(behavior, Orca):
         values = {_ORCA_NAMES[key]: value for key, value in values.items()}
     out: dict[str, Any] = {"name": behavior.name, **values}
@@ -78,6 +79,9 @@ def _groups(scenario: Scenario) -> tuple[list[dict], list[dict]]:
         if motion is None:
             obstacles.append(_obstacle(obstacle))
             continue
+        if isinstance(motion.behavior, Dash) and motion.behavior.yield_distance > 0.0 and motion.reacts_to_robot:
+            raise ConfigError(None, f"{where}.behavior.yield_distance", "IR-SIM's dash never yields to the robot; "
+                                                                        "allowed: 0, or reacts_to_robot: false")
         section = robots if motion.role == "robot" else obstacles
         if motion.group is None:
             section.append({**_mover(obstacle), "behavior": _behavior(motion)})

@@ -11,14 +11,15 @@ the robot (all of them at 1).
 ``warehouse_moving``: two or three shelving rows (ending 1.2 m short of the walls, so aisles meet
 at both ends as well) with aisles between them,
 a cross-aisle through every row, and a few crates off the paths. Forklifts patrol stretches of
-the aisles back and forth, blind to the robot (``dash`` along their waypoints: they turn round in
-place at each end); people walk stretches of the cross-aisle back and forth (social force, or
-ORCA). Difficulty sets the forklifts (1 + 2 d, one per aisle at most, at 0.4 to 0.4 + 1.2 d m/s)
-and the people (2 + 4 d, at 0.5 to 0.5 + 1.4 d m/s, past 0.5 a growing share blind to the robot,
-as in crowds). The robot's start and goal lie off the aisles' centre lines; the shelves, the
+the aisles back and forth (``dash`` along their waypoints: they turn round in place at each end);
+a driver who sees the robot stops while it stands within a metre ahead in the forklift's lane;
+people walk stretches of the cross-aisle back and forth (social force, or ORCA). Difficulty sets
+the forklifts (1 + 2 d, one per aisle at most, at 0.4 to 0.4 + 1.2 d m/s) and the people (2 + 4 d,
+at 0.5 to 0.5 + 1.4 d m/s); past 0.5 a growing share of drivers and people are blind to the
+robot (all of them at 1), as in crowds. The robot's start and goal lie off the aisles' centre lines; the shelves, the
 cross-aisle and the crates' gaps leave the goal reachable by construction (a test checks it).
 
-Options (a suite's variants): ``reacting`` (True or False: every person sees the robot, or none)
+Options (a suite's variants): ``reacting`` (True or False: every person and driver sees the robot, or none)
 and ``behavior`` (``orca`` or ``sfm`` for the whole crowd). Movers pass through each other and
 through nothing else (collision mode ``unobstructed_obstacles``); the robot stops on any contact.
 Each kind draws from its own seeded stream, so the static kinds' scenarios are untouched. The
@@ -41,6 +42,7 @@ FORKLIFT = (1.0, 0.6)  # m: a pallet truck's footprint, length x width
 FORKLIFT_SPEED = (0.4, 1.2)  # m/s: from 0.4 to 0.4 + 1.2 d (1 at difficulty 0.5)
 MARGIN = 0.5  # m: people and patrols keep this far inside the world's walls
 CLEAR_OF_ROBOT = 1.0  # m: between a mover's start (or a crate) and the robot's start and goal
+FORKLIFT_YIELD = 1.0  # m: a driver who sees the robot in the lane ahead, this close, stops until it leaves
 OFF_PATHS = 0.9  # m: from a warehouse's start and goal to the lines forklifts and people move along
 # The social force among generated people. IR-SIM's defaults let people walk into a robot standing
 # still (65% of 40 crowds within 30 s) and into each other (1.6 overlapping pairs a step); a
@@ -233,19 +235,20 @@ def warehouse_moving(template: Scenario, rng: np.random.Generator, difficulty: f
     statics = [frame.box(x, y, 2 * hx, 2 * hy, h) for x, y, hx, hy, h in boxes]
     statics += [frame.box(x, y, side, side, 0.6) for x, y, side in crates]
     movers: list[Obstacle] = []
+    unaware = max(0.0, 2.0 * difficulty - 1.0)  # the share of drivers and people blind to the robot, as in crowds
     for k in rng.permutation(len(aisles))[:1 + int(round(2 * difficulty))]:
         stretch = _stretch(rng, 1.0, width - 1.0, 2.0, ends, lambda u, y=float(aisles[k]): (u, y))
         if stretch is None:
             return None
         a, b = frame.point(stretch[0], float(aisles[k])), frame.point(stretch[1], float(aisles[k]))
         speed = float(rng.uniform(FORKLIFT_SPEED[0], FORKLIFT_SPEED[0] + FORKLIFT_SPEED[1] * difficulty))
-        motion = Motion(behavior=Dash(angle_tolerance=0.05), goals=[b], route="back_and_forth", kinematics="diff",
-                        vel_max=(speed, 1.5), vel_min=(0.0, -1.5), goal_threshold=0.2, reacts_to_robot=False,
-                        label="forklift")
+        sees = _sees(rng, unaware) if reacting is None else reacting
+        motion = Motion(behavior=Dash(angle_tolerance=0.05, yield_distance=FORKLIFT_YIELD), goals=[b],
+                        route="back_and_forth", kinematics="diff", vel_max=(speed, 1.5), vel_min=(0.0, -1.5),
+                        goal_threshold=0.2, reacts_to_robot=sees, label="forklift")
         movers.append(BoxObstacle(x=a[0], y=a[1], length=FORKLIFT[0], width=FORKLIFT[1],
                                   yaw=math.atan2(b[1] - a[1], b[0] - a[0]), height=2.0, motion=motion))
     kind = behavior or "sfm"
-    unaware = max(0.0, 2.0 * difficulty - 1.0)  # the share of people who do not see the robot, as in crowds
     fastest = crowd_size(difficulty)[1]
     for _ in range(2 + int(round(4 * difficulty))):
         stretch = _stretch(rng, 0.8, height - 0.8, 1.0, ends, lambda v: (cross, v))
@@ -253,12 +256,17 @@ def warehouse_moving(template: Scenario, rng: np.random.Generator, difficulty: f
             return None
         a, b = frame.point(cross, stretch[0]), frame.point(cross, stretch[1])
         radius, speed = float(rng.uniform(*PERSON_RADIUS)), float(rng.uniform(0.5, max(fastest, 0.5)))
-        # Drawn only where someone may be blind, so the layouts of difficulty 0.5 and below keep their draws.
-        sees = (unaware == 0.0 or rng.random() >= unaware) if reacting is None else reacting
+        sees = _sees(rng, unaware) if reacting is None else reacting
         movers.append(_person(a[0], a[1], radius, speed, kind, sees,
                               [b], "back_and_forth", None, "people"))
     start, goal = frame.point(*ends[0]), frame.point(*ends[1])
     return (*start, float(rng.uniform(-math.pi, math.pi))), goal, [*statics, *movers]
+
+
+def _sees(rng: np.random.Generator, unaware: float) -> bool:
+    """Whether a mover sees the robot, ``unaware`` the share that do not. Drawn only where someone
+    may be blind, so the layouts of difficulty 0.5 and below keep their draws."""
+    return unaware == 0.0 or rng.random() >= unaware
 
 
 def _stretch(rng: np.random.Generator, low: float, high: float, shortest: float, ends: np.ndarray,

@@ -10,7 +10,7 @@ from common.errors import ConfigError
 from common.generators import generate
 from common.irsim_export import scenario_to_irsim
 from common.irsim_format import parse_irsim
-from common.motion.spec import Motion, Orca, Sfm
+from common.motion.spec import Dash, Motion, Orca, Sfm
 from common.scenario import CircleObstacle
 from tests.conftest import optional
 
@@ -64,3 +64,8 @@ def test_what_irsim_cannot_say_is_one_line():
         scenario_to_irsim(scenario.model_copy(update={"obstacles": [person(Orca(), reacts=True)]}))
     with pytest.raises(ConfigError, match="IR-SIM's group behaviour has one set of parameters"):
         scenario_to_irsim(scenario.model_copy(update={"obstacles": [person(Sfm(vmax=1.0)), person(Sfm(vmax=2.0))]}))
+    driver = CircleObstacle(x=5.0, y=5.0, radius=0.2, motion=Motion(behavior=Dash(yield_distance=1.0), goals=[(6.0, 5.0)]))
+    with pytest.raises(ConfigError, match="0.circle.motion.behavior.yield_distance: IR-SIM's dash never yields"):
+        scenario_to_irsim(scenario.model_copy(update={"obstacles": [driver]}))
+    blind = driver.model_copy(update={"motion": driver.motion.model_copy(update={"reacts_to_robot": False})})
+    assert "yield_distance" not in str(scenario_to_irsim(scenario.model_copy(update={"obstacles": [blind]})))

@@ -146,6 +146,25 @@ def test_a_forklift_turns_round_at_the_ends_of_its_aisle():
     assert np.all(rows[:, 3] * np.cos(rows[:, 2]) + rows[:, 4] * np.sin(rows[:, 2]) >= -1e-9)  # never reversing
 
 
+@pytest.mark.parametrize("sees", [True, False])
+def test_a_driver_who_sees_the_robot_in_the_lane_stops_short_of_it_and_a_blind_one_does_not(sees):
+    def forklift(start_y: float) -> BoxObstacle:
+        motion = Motion(behavior=Dash(yield_distance=1.0), goals=[(9.0, start_y)], kinematics="diff",
+                        vel_max=(1.0, 1.5), vel_min=(0.0, -1.5), reacts_to_robot=sees, label="forklift")
+        return BoxObstacle(x=1.0, y=start_y, length=1.0, width=0.6, motion=motion)
+
+    world = world_of(forklift(5.0), forklift(5.8), start=(5.0, 5.0, 0.0), mode="unobstructed_obstacles")
+    world.reset()
+    steps = [world.step(0.0, 0.0) for _ in range(100)]
+    front = np.array([r.movers.rows[:, 0] for r in steps]) + 0.5
+    if sees:  # the lane's forklift waits, its front about a metre short of the robot (0.2 m radius)
+        assert 5.0 - 0.2 - 1.3 <= front[-1, 0] <= 5.0 - 0.2 - 0.8
+        assert np.all(front[-50:, 0] == front[-1, 0]) and not any(r.collided for r in steps)
+    else:
+        assert any(r.contact.by == "mover" for r in steps if r.collided)
+    assert front[-1, 1] - 0.5 == pytest.approx(9.0, abs=0.15)  # the one beside the lane (0.8 m off) drives past
+
+
 @pytest.mark.parametrize("behavior", [Orca(neighbor_dist=4.0, time_horizon=2.0), Sfm(vmax=1.0, force_factor_social=10.0,
                                                                                    safety_radius=0.3, lambda_importance=1.0)])
 def test_people_who_see_the_robot_go_round_it_and_blind_ones_walk_into_it(behavior):

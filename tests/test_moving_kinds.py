@@ -50,7 +50,17 @@ def test_a_warehouse_has_forklifts_on_patrol_and_people_crossing():
     labels = sorted(m.motion.label for m in scenario.movers)
     assert labels == ["forklift"] * 2 + ["person"] * 4
     for forklift in (m for m in scenario.movers if m.motion.label == "forklift"):
-        assert forklift.motion.route == "back_and_forth" and not forklift.motion.reacts_to_robot
+        assert forklift.motion.route == "back_and_forth" and forklift.motion.behavior.yield_distance > 0.0
+
+
+@pytest.mark.parametrize("suite, seeing", [("warehouse_moving", 1.0), ("warehouse_moving_unaware", 0.0)])
+def test_the_warehouse_suites_have_drivers_and_people_who_see_the_robot_or_not(suite, seeing):
+    movers = [m for s in get_suite(suite).scenarios(count=10) for m in s.movers]
+    assert {m.motion.label for m in movers} == {"forklift", "person"}
+    assert np.mean([m.motion.reacts_to_robot for m in movers]) == seeing
+    blind_share = np.mean([not m.motion.reacts_to_robot for s in (generate("warehouse_moving", seed, 0.75)
+                                                                   for seed in range(40)) for m in s.movers])
+    assert 0.3 < blind_share < 0.7  # half of them at difficulty 0.75
 
 
 def test_options_are_checked():

@@ -42,6 +42,9 @@ class Dash(Frozen):
 
     name: Literal["dash"] = "dash"
     angle_tolerance: Annotated[float, Field(ge=0.0, le=math.pi)] = 0.1  # rad: a heading error it drives with
+    # m: a mover that reacts to the robot holds still while the robot stands within this distance
+    # ahead of its front, in its lane (a forklift's driver braking); 0: never. IR-SIM's dash never does.
+    yield_distance: Annotated[float, Field(ge=0.0, le=10.0)] = 0.0
 
 
 class Rvo(Frozen):

@@ -37,6 +37,7 @@ from common.motion.table import (
 
 STOP, UNOBSTRUCTED_ALL, UNOBSTRUCTED_OBSTACLES = range(3)  # collision modes, as WorldSpec names them
 COLLISION_MODES = ("stop", "unobstructed", "unobstructed_obstacles")
+LANE_MARGIN = 0.1  # m: a yielding mover's lane reaches this far beyond its sides and the robot's
 
 
 @register_jitable
@@ -283,7 +284,23 @@ def command(F, I, params, goals, objects, segments, m, dt, neighbors) -> tuple[f
                            F[m, ANGLE_TOLERANCE], F[m, ACC1], dt)
     else:
         c0, c1 = omni_dash(F[m, X], F[m, Y], F[m, THETA], gx, gy, F[m, VMAX0], F[m, VMAX1], F[m, GOAL_THRESHOLD])
+    if I[m, REACTS] == 1 and params[m, 0] > 0.0 and robot_ahead(F, I, objects, m, params[m, 0]):
+        c0, c1 = 0.0, 0.0
     return min(max(c0, lo0), hi0), min(max(c1, lo1), hi1)
+
+
+@register_jitable
+def robot_ahead(F: np.ndarray, I: np.ndarray, objects: np.ndarray, m: int, distance: float) -> bool:  # noqa: E741
+    """Whether the robot's disc stands within ``distance`` ahead of mover ``m``'s front, in its lane
+    (its width and the robot's, and ``LANE_MARGIN`` either side): a ``dash`` mover yields to it."""
+    dx, dy = objects[0, OX] - F[m, X], objects[0, OY] - F[m, Y]
+    c, s = math.cos(F[m, THETA]), math.sin(F[m, THETA])
+    ahead, side = dx * c + dy * s, abs(dy * c - dx * s)
+    box = I[m, SHAPE] == BOX
+    front = 0.5 * F[m, LENGTH] if box else F[m, RADIUS]
+    half = 0.5 * F[m, WIDTH] if box else F[m, RADIUS]
+    radius = objects[0, OR]
+    return ahead > 0.0 and ahead - front - radius < distance and side < half + radius + LANE_MARGIN
 
 
 @register_jitable

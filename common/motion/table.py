@@ -123,7 +123,7 @@ def _behavior_row(motion: Motion, step_time: float) -> list[float]:
     elif isinstance(behavior, Rvo):
         row = [getattr(behavior, name) for name in RVO_PARAMETERS]
     else:
-        row = []
+        row = [behavior.yield_distance]
     return row + [0.0] * (PARAMS - len(row))
 
 
