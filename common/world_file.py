@@ -13,11 +13,17 @@ from common.yaml_io import read_yaml_mapping
 
 _IRSIM_ONLY_KEYS = {"obstacle", "gui", "custom", "irsim"}
 _IRSIM_ROBOT_KEYS = {"kinematics", "state", "sensors", "vel_max", "vel_min", "distribution", "number"}
+# Keys of IR-SIM's world section that a project scenario's world lacks (IR-SIM's empty world has no robot).
+_IRSIM_WORLD_KEYS = {"name", "sample_time", "step_mode", "control_mode", "obstacle_map", "mdownsample", "fog_map",
+                     "fog_map_resolution", "gravity", "friction", "restitution", "drive_tau", "plot", "status"}
 
 
 def is_irsim(data: dict) -> bool:
     """Whether a parsed YAML mapping is an IR-SIM world rather than a project scenario."""
     if _IRSIM_ONLY_KEYS & data.keys():
+        return True
+    world = data.get("world")
+    if isinstance(world, dict) and _IRSIM_WORLD_KEYS & world.keys():
         return True
     robot = data.get("robot")
     if isinstance(robot, list):

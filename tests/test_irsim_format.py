@@ -400,6 +400,7 @@ ERRORS = [
     (ROBOT + "  sensors: [{range_min: 5, range_max: 2}]\n", "robot.sensors[0]", "range_min"),
     (ROBOT + "  sensors: [{noise: yes please}]\n", "robot.sensors[0].noise", "expected true or false"),
     ("robot: []\n", "robot", "no robot"),
+    ("world: {sample_time: 0.1}\n", "robot", "no robot"),  # IR-SIM's empty world, not a scenario's unknown key
     ("robot: {number: 0, kinematics: {name: diff}}\n", "robot", "no robot"),
     ("robot: 3\n", "robot", "expected a mapping or a list"),
     (ROBOT + "obstacle: [3]\n", "obstacle[0]", "expected a mapping"),
