@@ -117,6 +117,10 @@ def _eval(args: argparse.Namespace) -> int:
 
 
 def _policies(paths):
+    from common.curriculum.policy_file import PolicyFile
+
+    for path in paths or []:  # a file that is no policy is refused before torch loads (seconds)
+        PolicyFile(path).manifest
     from common.curriculum.policy import load_policy
 
     return [load_policy(path) for path in paths or []]
@@ -219,12 +223,14 @@ def _agent(spec: str):
 def _compare(args: argparse.Namespace) -> int:
     from rich.progress import Progress
 
+    policies = _policies(args.policy)
+    _settle(args, policies)
+    scenarios = _scenarios(args)  # a bad file is refused before the controllers and worlds load (seconds)
+    agents = _controllers(args.controllers, "--controllers") + policies
+
     from common.evaluation import evaluate
     from common.curriculum.comparison import bar_chart, markdown_table, write_csv
 
-    agents = _controllers(args.controllers, "--controllers") + _policies(args.policy)
-    _settle(args, agents)
-    scenarios = _scenarios(args)
     radius, conditions = _judged(args, agents), _conditions(args, agents)
     source = Path(args.scenario_file).stem if args.scenario_file else args.suite
     out = _compare_directory(Path(args.out) if args.out else Path("runs") / "compare" / f"{args.world}-{source}")
