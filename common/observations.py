@@ -201,13 +201,14 @@ def _still_world_ranges(previous, x0, y0, t0, x1, y1, t1, mount, a0, step, wrap,
     sx1, sy1 = x1 + math.cos(t1) * mx - math.sin(t1) * my, y1 + math.sin(t1) * mx + math.cos(t1) * my
     bearing, reach = np.empty(n), np.empty(n)
     for k in range(n):
-        angle = t0 + myaw + a0 + k * step
-        dx = sx0 + previous[k] * math.cos(angle) - sx1
-        dy = sy0 + previous[k] * math.sin(angle) - sy1
-        reach[k] = math.hypot(dx, dy) if previous[k] < range_max else range_max
-        bearing[k] = (math.atan2(dy, dx) - t1 - myaw - a0) % _TWO_PI  # from the first beam
-        if previous[k] >= range_max:
-            bearing[k] = k * step  # a miss says "nothing within range" along its own beam
+        if previous[k] >= range_max:  # a miss says "nothing within range" along its own beam
+            reach[k], bearing[k] = range_max, k * step
+        else:
+            angle = t0 + myaw + a0 + k * step
+            dx = sx0 + previous[k] * math.cos(angle) - sx1
+            dy = sy0 + previous[k] * math.sin(angle) - sy1
+            reach[k] = math.hypot(dx, dy)
+            bearing[k] = (math.atan2(dy, dx) - t1 - myaw - a0) % _TWO_PI  # from the first beam
         m = int(round(bearing[k] / step))
         m = m % n if wrap else m
         if 0 <= m < n and not reach[k] >= out[m]:

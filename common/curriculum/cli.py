@@ -119,11 +119,10 @@ def _eval(args: argparse.Namespace) -> int:
 def _policies(paths):
     from common.curriculum.policy_file import PolicyFile
 
-    for path in paths or []:  # a file that is no policy is refused before torch loads (seconds)
-        PolicyFile(path).manifest
+    files = [PolicyFile(path) for path in paths or []]  # a file that is no policy is refused before torch loads
     from common.curriculum.policy import load_policy
 
-    return [load_policy(path) for path in paths or []]
+    return [load_policy(file) for file in files]
 
 
 def _bench(args: argparse.Namespace) -> int:

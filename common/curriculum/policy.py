@@ -180,9 +180,10 @@ class PolicyAgent:
         return self.mapping.to_velocity(action)
 
 
-def load_policy(path: str | Path, device: str = "cpu", name: str | None = None) -> PolicyAgent:
-    """A :class:`PolicyAgent` from a policy zip (nothing in the zip is executed)."""
-    file = PolicyFile(path)
+def load_policy(path: str | Path | PolicyFile, device: str = "cpu", name: str | None = None) -> PolicyAgent:
+    """A :class:`PolicyAgent` from a policy zip, or one already opened (nothing in the zip is executed)."""
+    file = path if isinstance(path, PolicyFile) else PolicyFile(path)
+    path = file.path
     manifest = file.manifest
     state = file.tensors(f"{POLICY_WEIGHTS}.pth", device)
     check_network(manifest, state, file, POLICY_WEIGHTS)  # before anything is built
