@@ -205,3 +205,29 @@ def test_too_many_movers_and_mixed_groups_are_refused():
     sfm = {**walker, "motion": {"goals": [[5.0, 6.0]], "behavior": {"name": "sfm"}, "group": "g"}}
     with pytest.raises(ConfigError, match="the movers of group 'g' differ"):
         scenario_from_mapping({"obstacles": [orca, sfm]})
+
+
+def test_a_reset_starts_the_same_episode_again_from_the_same_start_and_a_new_one_from_another():
+    from common.generators import generate
+    from common.motion.movers import Movers
+
+    crowd = generate("crowd", 0, 1.0, "eval", reacting=True, behavior="sfm")  # people who see the robot
+
+    def episode(movers: Movers, pose) -> np.ndarray:
+        """What the first readings see (states, lidar circles), then the movers' poses each step."""
+        movers.reset(pose)
+        rng = np.random.default_rng(0)  # the wanderers' next goals
+        seen = [movers.states().rows.ravel(), movers.visible()[0].copy().ravel()]
+        for k in range(60):
+            movers.finish((pose[0] + 0.02 * k, pose[1], pose[2]), 0.2, 0.0, False, rng)
+            seen.append(movers.states().rows[:, :3].ravel())
+        return np.concatenate(seen)
+
+    here, there = (1.0, 1.0, 0.0), (5.0, 5.0, 0.0)
+    movers = Movers(crowd)
+    first = episode(movers, here)
+    assert np.array_equal(episode(movers, here), first)  # the same start again
+    elsewhere = episode(movers, there)
+    assert np.array_equal(elsewhere, episode(Movers(crowd), there))
+    assert not np.array_equal(elsewhere, first)
+    assert np.array_equal(episode(movers, here), first)

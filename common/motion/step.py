@@ -184,6 +184,9 @@ def _plan_sfm(F, I, params, goals, objects, segments, members, inside, dt, neigh
     k = members.shape[0]
     pushes = np.zeros((k, k, 2))
     counted = np.zeros((k, k), dtype=np.bool_)
+    alike = True  # whether every member pushes with the same parameters (a crowd's usual case)
+    for a in range(1, k):
+        alike = alike and _same_social(params[members[0]], params[members[a]])
     for a in range(k):
         i, ri = members[a], I[members[a], ROW]
         for c in range(a + 1, k):
@@ -192,7 +195,7 @@ def _plan_sfm(F, I, params, goals, objects, segments, members, inside, dt, neigh
                                         objects[rj, OX], objects[rj, OY], objects[rj, OVX], objects[rj, OVY],
                                         params[i], False)
             pushes[a, c, 0], pushes[a, c, 1], counted[a, c] = fx, fy, counts
-            if _same_social(params[i], params[j]):
+            if alike or _same_social(params[i], params[j]):
                 pushes[c, a, 0], pushes[c, a, 1], counted[c, a] = -fx, -fy, counts
             else:
                 pushes[c, a, 0], pushes[c, a, 1], counted[c, a] = pair_force(
