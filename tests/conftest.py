@@ -2,6 +2,7 @@
 
 import importlib
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -10,12 +11,24 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 TABLES_ENV = "NAV_TEST_TABLES_DIR"
 
 
+_MADE: list[str] = []  # the folders this session made, removed when it ends
+
+
 def pytest_configure(config):
     # The controller process makes the folder; pytest-xdist workers inherit the variable.
     if not hasattr(config, "workerinput"):
-        os.environ[TABLES_ENV] = tempfile.mkdtemp(prefix="nav-tables-")
+        _MADE.append(tempfile.mkdtemp(prefix="nav-tables-"))
+        os.environ[TABLES_ENV] = _MADE[-1]
         # SB3 gives every model trained without a logger a /tmp/SB3-<time> folder; keep them in one place.
-        os.environ.setdefault("SB3_LOGDIR", tempfile.mkdtemp(prefix="nav-sb3-logs-"))
+        if "SB3_LOGDIR" not in os.environ:
+            _MADE.append(tempfile.mkdtemp(prefix="nav-sb3-logs-"))
+            os.environ["SB3_LOGDIR"] = _MADE[-1]
+
+
+def pytest_unconfigure(config):
+    """Remove the session's folders (after the summary has printed the tables from them)."""
+    while _MADE:
+        shutil.rmtree(_MADE.pop(), ignore_errors=True)
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus, config):

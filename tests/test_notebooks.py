@@ -103,6 +103,18 @@ def test_a_lesson_is_executed_again_when_its_code_or_the_package_changes_not_its
     assert course.cache_key(notebook) == key
 
 
+def test_the_files_an_executed_lesson_writes_leave_with_its_kernel(tmp_path):
+    """Lessons write their GIFs into tempfile's folders: executed for the site or a test run, they
+    must not pile up in /tmp (a student's own Jupyter keeps them)."""
+    import nbformat
+
+    notebook = tmp_path / "lesson.ipynb"
+    nbformat.write(nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(
+        "import tempfile\nfolder = tempfile.mkdtemp(prefix='course-test-')\nprint(folder)")]), notebook)
+    folder = course.execute(notebook).cells[0].outputs[0]["text"].strip()
+    assert folder and not os.path.exists(folder)
+
+
 def test_the_cache_key_is_the_same_for_mkdocs_and_for_pytest(tmp_path):
     """`mkdocs serve` (the console script), `python -m mkdocs` (the site test) and pytest (the lesson
     tests) see different sys.path entries (the working directory, and in it a stray *.egg-info); a

@@ -122,17 +122,21 @@ def execute(notebook: Path) -> nbformat.NotebookNode:
     from traitlets.config import Config
 
     nb = nbformat.read(notebook, as_version=4)
-    with tempfile.TemporaryDirectory(prefix="course-kernel-") as sockets:
+    with tempfile.TemporaryDirectory(prefix="course-kernel-") as scratch:
         # IPC (sockets under an absolute path) rather than TCP: the kernel then prints no warning
         # about unencrypted local ports into the build's log. The client makes the kernel manager
         # from this config, so it also shuts the kernel down when the notebook is done.
         config = Config()
-        config.KernelManager.transport, config.KernelManager.ip = "ipc", os.path.join(sockets, "kernel")
+        config.KernelManager.transport, config.KernelManager.ip = "ipc", os.path.join(scratch, "kernel")
         client = NotebookClient(nb, config=config, timeout=CELL_TIMEOUT,
                                 kernel_name=nb.metadata.get("kernelspec", {}).get("name", "python3"),
                                 resources={"metadata": {"path": str(notebook.parent)}})
+        # The files a lesson writes (into tempfile's folders) go under this one and leave with it:
+        # a student's own run keeps them, a build or a test run does not fill /tmp.
+        files = os.path.join(scratch, "files")
+        os.mkdir(files)
         try:
-            client.execute(env=kernel_environment())
+            client.execute(env={**kernel_environment(), "TMPDIR": files})
         except CellExecutionError as error:
             error.notebook = nb
             raise
