@@ -26,7 +26,10 @@ class Pose2D(NamedTuple):
 @register_jitable
 def wrap_angle(angle: float) -> float:
     """Wrap an angle to [-pi, pi)."""
-    wrapped = (angle + math.pi) % (2.0 * math.pi) - math.pi
+    shifted = angle + math.pi
+    # x % 2 pi is x itself for x in [0, 2 pi): the same bits without the modulo's fmod, which cost
+    # a mover's step a tenth of its time.
+    wrapped = (shifted if 0.0 <= shifted < 2.0 * math.pi else shifted % (2.0 * math.pi)) - math.pi
     # Just below -pi, the modulo rounds up to 2 pi and the formula alone would give +pi.
     return wrapped if wrapped < math.pi else -math.pi
 

@@ -224,7 +224,9 @@ def wrap_to_pi(angle: float) -> float:
     """
     if not math.isfinite(angle):
         return 0.0
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+    shifted = angle + math.pi
+    # x % 2 pi is x itself for x in [0, 2 pi): the same bits, without the modulo's fmod.
+    return (shifted if 0.0 <= shifted < 2.0 * math.pi else shifted % (2.0 * math.pi)) - math.pi
 
 
 @register_jitable
