@@ -41,6 +41,17 @@ class Contact(NamedTuple):
     by: str
 
 
+def mover_fault(pose: tuple[float, float, float], v: float, mover: np.ndarray) -> str:
+    """Who moved into whom (:attr:`Contact.by`): the robot at ``pose`` driving at ``v``, if it closed
+    on the mover at least as fast as the mover closed on it (``mover``: a row of ``Readings.movers``)."""
+    x, y, yaw = pose
+    dx, dy = mover[0] - x, mover[1] - y
+    distance = math.hypot(dx, dy) or 1.0
+    robot_closing = v * (math.cos(yaw) * dx + math.sin(yaw) * dy) / distance
+    mover_closing = -(mover[3] * dx + mover[4] * dy) / distance
+    return "robot" if robot_closing >= mover_closing else "mover"
+
+
 class Readings(NamedTuple):
     """One snapshot of a world: later steps never change it (immutable fields, read-only arrays;
     a NamedTuple because one is built every env step and it is the cheapest immutable record).

@@ -22,9 +22,9 @@ import pymunk
 from common.actuation import Actuator, WheelDynamics
 from common.conditions import Conditions
 from common.kinematics import INTEGRATORS, Pose2D, WheelOdometry, wheel_speeds, wrap_angle
-from common.motion.movers import Movers
+from common.motion.movers import Movers, mover_generator
 from flatland.polygons import convex_pieces
-from common.readings import Contact, Imu, Odometry, Readings, frozen
+from common.readings import Contact, Imu, Odometry, Readings, frozen, mover_fault
 from common.geometry import box_corner_table
 from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, SegmentObstacle, WorldSpec
 from flatland.clearance import path_clear, swept_capsule
@@ -76,6 +76,11 @@ class World:
         self.conditions = (conditions or Conditions()).for_tier("flatland")
         scenario = self.scenario = self.conditions.scenario(scenario)
         self.rng = np.random.default_rng(seed) if rng is None else rng
+        # The movers draw from a stream of their own, so that a seed moves them alike in every tier
+        # whatever else a tier draws (the 3D tier's sensor noise); an IR-SIM file's movers draw from
+        # its generator, in IR-SIM's order.
+        self._one_stream = rng is not None
+        self.mover_rng = self.rng if self._one_stream else mover_generator(seed)
         robot = scenario.robot
         first_order = self.conditions.dynamics == "first_order"
         self.actuator = Actuator(WheelDynamics(robot.wheel_radius, robot.wheel_base) if first_order else None)
@@ -238,6 +243,7 @@ class World:
         if seed is not None and self._draws:
             self.rng = np.random.default_rng(seed)
             self.lidar.rng = self.odometry.rng = self.rng
+            self.mover_rng = self.rng if self._one_stream else mover_generator(seed)
         self.pose = self.scenario.start_pose
         self.velocity = (0.0, 0.0)
         self.steps = 0
@@ -280,26 +286,15 @@ class World:
             self.stopped = self._touching_static and self._halts
             self.readings = self._read(acceleration, self.lidar.scan(*self.pose) if ranges is None else ranges)
             return self.readings
-        touched = movers.finish(self.pose, v, w, self.stopped, self.rng)
+        touched = movers.finish(self.pose, v, w, self.stopped, self.mover_rng)
         contact = None
         if self._touching_static:
             contact = Contact("static", -1, "robot")
         elif touched >= 0:
-            contact = Contact("mover", touched, self._fault(movers.states().rows[touched]))
+            contact = Contact("mover", touched, mover_fault(self.pose, self.velocity[0], movers.states().rows[touched]))
         self.stopped = contact is not None and self._halts
         self.readings = self._read(acceleration, self.lidar.scan(*self.pose, *movers.visible()), contact)
         return self.readings
-
-    def _fault(self, mover: np.ndarray) -> str:
-        """Who moved into whom: the robot, if it closed on the mover at least as fast as the mover
-        closed on it (``mover``: a row of :meth:`Movers.states`)."""
-        x, y, yaw = self.pose
-        dx, dy = mover[0] - x, mover[1] - y
-        distance = math.hypot(dx, dy) or 1.0
-        v = self.velocity[0]
-        robot_closing = v * (math.cos(yaw) * dx + math.sin(yaw) * dy) / distance
-        mover_closing = -(mover[3] * dx + mover[4] * dy) / distance
-        return "robot" if robot_closing >= mover_closing else "mover"
 
     def _free_step(self, v: float, w: float, scan: bool = True) -> np.ndarray | None:
         """The compiled step (:mod:`flatland.free_step`) if the move touches nothing: pose and

@@ -33,16 +33,30 @@ _COLOURS = {
     "pillar": (0.95, 0.80, 0.15, 1.0),
     "polygon": (0.45, 0.60, 0.45, 1.0),
     "segment": (0.40, 0.40, 0.45, 1.0),
+    # Movers, by their label: people in blue, forklifts in safety orange, carts and the rest in grey.
+    "person": (0.20, 0.35, 0.80, 1.0),
+    "forklift": (0.95, 0.50, 0.05, 1.0),
+    "cart": (0.55, 0.55, 0.60, 1.0),
+    "robot": (0.30, 0.70, 0.70, 1.0),
+    "obstacle": (0.60, 0.30, 0.60, 1.0),
 }
 _SHELF_HEIGHT = 1.0  # m: boxes at least this tall are drawn as shelving, lower ones as crates
 _GHOST_ALPHA = 0.35  # unobstructed obstacles: seen by the camera only, translucent
 
 
 class Tag(NamedTuple):
-    """What a body is: ``floor``, ``wall`` or ``obstacle`` (with its index in ``scenario.obstacles``)."""
+    """What a body is: ``floor``, ``wall``, ``obstacle`` or ``mover`` (with its index in
+    ``scenario.obstacles``; a mover also with its label: ``person``, ``forklift``, ...), or ``robot``."""
 
     kind: str
     index: int | None = None
+    label: str | None = None
+
+
+# The classes of :meth:`Warehouse.classes`, by index: what each pixel of a segmentation image shows.
+SEGMENTATION_CLASSES = ("nothing", "floor", "wall", "obstacle", "robot", "person", "forklift", "cart", "moving robot",
+                        "moving obstacle")
+_MOVER_CLASSES = {"robot": "moving robot", "obstacle": "moving obstacle"}  # labels that name a static class too
 
 
 @dataclass
@@ -55,6 +69,15 @@ class Warehouse:
     def bodies(self, kind: str) -> list[int]:
         """The ids of the bodies of one kind, in creation order."""
         return [body for body, tag in self.tags.items() if tag.kind == kind]
+
+    def classes(self, segmentation: np.ndarray) -> np.ndarray:
+        """A segmentation image of body ids as indices into :data:`SEGMENTATION_CLASSES`: a mover
+        is its label (a person, a forklift), anything else its kind; pixels on nothing 0."""
+        table = np.zeros(max(self.tags, default=0) + 2, dtype=np.uint8)  # the last entry: anything untagged
+        for body, tag in self.tags.items():
+            name = _MOVER_CLASSES.get(tag.label, tag.label) if tag.kind == "mover" else tag.kind
+            table[body] = SEGMENTATION_CLASSES.index(name)
+        return table[np.where((segmentation >= 0) & (segmentation < len(table) - 1), segmentation, -1)]
 
 
 def build(scenario: Scenario, client: int) -> Warehouse:
@@ -70,8 +93,9 @@ def build(scenario: Scenario, client: int) -> Warehouse:
         for body in _walls(client, x0, y0, world.width, world.height):
             warehouse.tags[body] = Tag("wall")
     for index, obstacle in enumerate(scenario.obstacles):
-        for body in _obstacle(client, obstacle):
-            warehouse.tags[body] = Tag("obstacle", index)
+        motion = getattr(obstacle, "motion", None)
+        for body in _obstacle(client, obstacle, None if motion is None else motion.label):
+            warehouse.tags[body] = Tag("obstacle", index) if motion is None else Tag("mover", index, motion.label)
     return warehouse
 
 
@@ -86,17 +110,18 @@ def _walls(client: int, x0: float, y0: float, width: float, height: float) -> li
     ]
 
 
-def _obstacle(client: int, obstacle: Obstacle) -> list[int]:
-    """The bodies of one obstacle (several for a segment polyline or a non-convex polygon)."""
+def _obstacle(client: int, obstacle: Obstacle, label: str | None = None) -> list[int]:
+    """The bodies of one obstacle (several for a segment polyline or a non-convex polygon); a mover's
+    (``label``: what it is) in its label's colour, where it starts."""
     solid = not obstacle.unobstructed
     h = obstacle.height
     if isinstance(obstacle, CircleObstacle):
-        r, colour = obstacle.radius, _shade(_COLOURS["pillar"], solid)
+        r, colour = obstacle.radius, _shade(_COLOURS[label or "pillar"], solid)
         collision = p.createCollisionShape(p.GEOM_CYLINDER, radius=r, height=h, physicsClientId=client) if solid else -1
         visual = p.createVisualShape(p.GEOM_CYLINDER, radius=r, length=h, rgbaColor=colour, physicsClientId=client)
         return [_body(client, collision, visual, (obstacle.x, obstacle.y, 0.5 * h), 0.0)]
     if isinstance(obstacle, BoxObstacle):
-        colour = _shade(_COLOURS["shelf" if h >= _SHELF_HEIGHT else "crate"], solid)
+        colour = _shade(_COLOURS[label or ("shelf" if h >= _SHELF_HEIGHT else "crate")], solid)
         return [_box(client, (obstacle.x, obstacle.y, 0.5 * h), (0.5 * obstacle.length, 0.5 * obstacle.width, 0.5 * h),
                      obstacle.yaw, colour, solid)]
     if isinstance(obstacle, PolygonObstacle):

@@ -18,11 +18,13 @@ from common.actuation import Actuator
 from common.conditions import Conditions
 from common.errors import ConfigError
 from common.kinematics import Pose2D, WheelOdometry, unicycle_exact, wrap_angle
-from common.readings import Odometry, Readings, frozen
+from common.motion.movers import mover_generator
+from common.readings import Contact, Odometry, Readings, frozen, mover_fault
 from common.scenario import Scenario
 from physics3d.robot import ROBOT_COLLISION_GROUP, WHEEL_BASE, WHEEL_RADIUS, Robot, yaw_of
 from physics3d.sensors import GRAVITY, Camera, Imu, Lidar
-from physics3d.warehouse import Warehouse, build
+from physics3d.movers import MovingBodies
+from physics3d.warehouse import Tag, Warehouse, build
 
 PHYSICS_HZ = 240
 # Ten solver iterations instead of PyBullet's fifty: the robot still tracks (v, w) within about 1 %
@@ -34,17 +36,14 @@ SETTLE_SUBSTEPS = 24  # at build: let the robot sink into its contacts before th
 TOUCH_DISTANCE = 1e-3  # m
 
 
-def refuse_motion(scenario: Scenario) -> None:
-    """A one-line error for what this tier cannot build yet: obstacles that move, and IR-SIM's
-    collision modes other than ``stop`` (a world that loaded and then stood still would be wrong
-    without a word)."""
-    for index, obstacle in enumerate(scenario.obstacles):
-        if getattr(obstacle, "motion", None) is not None:
-            raise ConfigError(None, f"obstacles.{index}.motion", "the 3D tier does not move obstacles yet; "
-                              "allowed: static obstacles (run moving worlds in flatland)")
-    if scenario.world.collision_mode != "stop":
-        raise ConfigError(None, "world.collision_mode", f"{scenario.world.collision_mode!r} is not modelled in the "
-                          "3D tier; allowed: stop")
+def refuse_unmodelled(scenario: Scenario) -> None:
+    """A one-line error for what this tier cannot build: IR-SIM's ``unobstructed`` collision mode
+    (here the robot collides with what it touches; a world that loaded and then behaved otherwise
+    would be wrong without a word). ``unobstructed_obstacles`` is modelled: the robot stops on a
+    contact, as in ``stop``, and the movers pass on as :mod:`common.motion` moves them."""
+    if scenario.world.collision_mode == "unobstructed":
+        raise ConfigError(None, "world.collision_mode", "'unobstructed' is not modelled in the 3D tier; "
+                          "allowed: stop, unobstructed_obstacles")
 
 
 class World:
@@ -68,7 +67,7 @@ class World:
 
     def __init__(self, scenario: Scenario, seed: int | None = None, conditions: Conditions | None = None,
                  gui: bool = False, camera: bool = False) -> None:
-        refuse_motion(scenario)
+        refuse_unmodelled(scenario)
         if gui and sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
             # PyBullet's GUI waits forever for a window it cannot open; fail instead.
             raise RuntimeError("the PyBullet GUI needs an X display (DISPLAY is not set); try xvfb-run")
@@ -79,6 +78,7 @@ class World:
         self.substeps = max(1, round(period * PHYSICS_HZ))
         self.period = self.substeps / PHYSICS_HZ
         self.rng = np.random.default_rng(seed)
+        self.mover_rng = mover_generator(seed)  # flatland's stream: the same seed, the same movers
         self.gyro_heading = resolved.heading_source == "gyro"
         self.actuator = Actuator()
         renderer = p.ER_BULLET_HARDWARE_OPENGL if gui else p.ER_TINY_RENDERER
@@ -88,7 +88,7 @@ class World:
 
     def load(self, scenario: Scenario) -> None:
         """Replace everything with the world of ``scenario``, in the same client (a GUI window stays open)."""
-        refuse_motion(scenario)
+        refuse_unmodelled(scenario)
         c = self.client
         scenario = self.conditions.scenario(scenario)
         if self.gui:
@@ -105,6 +105,8 @@ class World:
         self.scenario = scenario
         self.warehouse: Warehouse = build(scenario, c)
         self.robot = Robot(c, scenario.start_pose)
+        self.warehouse.tags[self.robot.id] = Tag("robot")
+        self.movers = MovingBodies(scenario, c, self.warehouse) if scenario.movers else None
         self.lidar = Lidar(scenario.lidar, c, self.robot.lidar_height, self.rng, ROBOT_COLLISION_GROUP)
         self.imu = Imu(self.rng, self.conditions.accel_noise, self.conditions.gyro_noise)
         robot = scenario.robot
@@ -125,6 +127,7 @@ class World:
         if seed is not None:
             self.rng = np.random.default_rng(seed)
             self.lidar.rng = self.imu.rng = self.odometry.rng = self.rng
+            self.mover_rng = mover_generator(seed)
         p.restoreState(self._state, physicsClientId=self.client)
         drawn = self.conditions.draw(self.rng)
         self.actuator.reset(drawn.action_delay, drawn.motor_gain)
@@ -133,11 +136,15 @@ class World:
         if drawn.mass_scale is not None:
             self.robot.set_mass_scale(drawn.mass_scale)
         self.robot.drive(0.0, 0.0)
+        self._driving = 0.0  # the speed the wheels are driven at
         self.steps = 0
         self._angles = self.robot.wheel_angles()
         self.odometry.reset(self.pose())
         self.imu.reset(drawn.gyro_bias)
-        self.readings = self._read(0.0, bool(self.touching()))
+        if self.movers is not None:
+            self.movers.reset(self.pose())
+            p.performCollisionDetection(physicsClientId=self.client)
+        self.readings = self._read(0.0, self._contact(self.touching()))
         return self.readings
 
     def step(self, v: float, w: float) -> Readings:
@@ -147,20 +154,26 @@ class World:
         if not self.actuator.idle:
             v, w = self.actuator(v, w, self.period)
         self.robot.drive(v, w)
+        self._driving = v
         # A contact at any sub-step counts: a graze that separates again within the control period
         # is a collision too, not only one still touching at its end.
-        collided = False
+        touched: list[int] = []
         if self.gui:
             # Draw the end of the period, not each sub-step: drawing 24 frames a period is what
             # held the GUI at a third of real time on a software renderer.
             p.configureDebugVisualizer(p.COV_ENABLE_RENDERING, 0, physicsClientId=self.client)
         for _ in range(self.substeps):
             p.stepSimulation(physicsClientId=self.client)
-            collided = collided or bool(self.touching())
+            touched = touched or self.touching()
+        if self.movers is not None:
+            # The movers step after the robot, from where it is and how it moves now.
+            pose = self.pose()
+            self.movers.finish(pose, self._speed(pose.yaw), self.robot.velocity()[1][2], self.mover_rng)
+            touched = touched or self.touching()
         if self.gui:
             p.configureDebugVisualizer(p.COV_ENABLE_RENDERING, 1, physicsClientId=self.client)
         self.steps += 1
-        self.readings = self._read(self.period, collided)
+        self.readings = self._read(self.period, self._contact(touched))
         return self.readings
 
     def pose(self) -> Pose2D:
@@ -176,7 +189,24 @@ class World:
         others.discard(floor)
         return sorted(others)
 
-    def _read(self, dt: float, collided: bool) -> Readings:
+    def _contact(self, touched: list[int]) -> Contact | None:
+        """What the robot touched (``touched``: body ids), as flatland reports it: static geometry
+        first, else the first mover; None for nothing."""
+        rows = [] if self.movers is None else [self.movers.row_of[b] for b in touched if b in self.movers.row_of]
+        if not touched:
+            return None
+        if len(rows) < len(touched):
+            return Contact("static", -1, "robot")
+        # Judged by the speed the robot was driven at this period, as flatland judges it: at the
+        # contact itself the body has already been stopped, or pushed back, by what it met.
+        return Contact("mover", rows[0], mover_fault(self.pose(), self._driving, self.movers.states().rows[rows[0]]))
+
+    def _speed(self, yaw: float) -> float:
+        """The robot's true speed along its heading."""
+        linear, _ = self.robot.velocity()
+        return linear[0] * math.cos(yaw) + linear[1] * math.sin(yaw)
+
+    def _read(self, dt: float, contact: Contact | None) -> Readings:
         position, orientation = self.robot.link_pose()
         yaw = yaw_of(orientation)
         linear, angular = self.robot.velocity()
@@ -193,13 +223,15 @@ class World:
         odometry = self.odometry
         return Readings(
             pose=Pose2D(position[0], position[1], yaw),
-            velocity=(linear[0] * math.cos(yaw) + linear[1] * math.sin(yaw), angular[2]),
+            velocity=(self._speed(yaw), angular[2]),
             odometry=Odometry(odometry.pose, odometry.v, odometry.w),
             lidar=frozen(self.lidar.scan(position[0], position[1], position[2], yaw)),
             imu=self.imu.read(orientation, linear, angular, dt),
-            collided=collided,
+            collided=contact is not None,
             time=self.steps * self.period,
             camera=camera,
+            movers=None if self.movers is None else self.movers.states(),
+            contact=contact,
         )
 
     def close(self) -> None:

@@ -36,6 +36,7 @@ from flatland.world import World as FlatWorld
 from physics3d.robot import (ROBOT_COLLISION_GROUP, ROBOT_PROFILE, TEMPLATE, URDF_PATH, WHEEL_BASE, WHEEL_RADIUS,
                              Robot)
 from physics3d.sensors import GRAVITY, Lidar
+from physics3d.warehouse import Tag
 from physics3d.world import World
 
 OPEN = TEMPLATE.model_copy(update={"start": (5.0, 5.0, 0.0), "goal": (9.0, 9.0)})
@@ -292,7 +293,7 @@ def test_driving_into_a_box_is_a_collision_and_the_floor_is_not():
             break
     # 1.35 m from the body's front to the box at 0.05 m per step.
     assert readings.collided and 25 <= step <= 28
-    assert [world.warehouse.tags[body] for body in world.touching()] == [("obstacle", 0)]
+    assert [world.warehouse.tags[body] for body in world.touching()] == [Tag("obstacle", 0)]
     assert readings.pose.x == pytest.approx(7.0 - 0.5 - 0.15, abs=0.01)
 
 

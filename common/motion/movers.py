@@ -28,6 +28,15 @@ from common.motion.table import (
 from common.scenario import Scenario
 
 
+_MOVERS_STREAM = 0x6D6F76  # a word of the movers' seed sequence: their draws are a stream of their own
+
+
+def mover_generator(seed: int | None) -> np.random.Generator:
+    """The generator a world's movers draw from (a wanderer's next goals) for an episode ``seed``:
+    every tier makes the same one, whatever else it draws from the seed."""
+    return np.random.default_rng(None if seed is None else [seed, _MOVERS_STREAM])
+
+
 class MoverStates(NamedTuple):
     """Where the movers are: one row each of x, y, heading, vx, vy (world frame), radius (a box's
     half diagonal), length and width (a box's; 0 for a circle); and what each is (its label)."""
@@ -168,6 +177,12 @@ class Movers:
             # Alone with its goal behind it: IR-SIM turns it in place instead of leaving it frozen.
             w = world_to_diff(F[m, THETA], desired[0], desired[1], 1.5, 0.2, 0.1, 0.02)[1]
         return v, w
+
+    @property
+    def rows(self) -> np.ndarray:
+        """The table rows of the movers that move (the controlled robot's own left out), in the
+        order of :meth:`states`."""
+        return self._moving
 
     def states(self) -> MoverStates:
         """The movers' poses, velocities and sizes now (the controlled robot's own row left out)."""
