@@ -34,6 +34,9 @@ SETTLE_SUBSTEPS = 24  # at build: let the robot sink into its contacts before th
 # A contact point nearer than this counts as touching. Bullet keeps manifold points until they
 # separate by 2 cm, so a robot that has just slid past a box still lists it for a few sub-steps.
 TOUCH_DISTANCE = 1e-3  # m
+# The robot's reach from its centre (half its 0.3 x 0.22 m footprint's diagonal, wheels included,
+# rounded up), and what a period's travel may exceed its driven speed by (a bump, a push).
+ROBOT_REACH, REACH_MARGIN = 0.25, 0.1  # m
 
 
 def refuse_unmodelled(scenario: Scenario) -> None:
@@ -162,9 +165,11 @@ class World:
             # Draw the end of the period, not each sub-step: drawing 24 frames a period is what
             # held the GUI at a third of real time on a software renderer.
             p.configureDebugVisualizer(p.COV_ENABLE_RENDERING, 0, physicsClientId=self.client)
+        near = self._bodies_near(max(abs(v), abs(self.readings.velocity[0])))
         for _ in range(self.substeps):
             p.stepSimulation(physicsClientId=self.client)
-            touched = touched or self.touching()
+            if near and not touched:
+                touched = self.touching(near)
         if self.movers is not None:
             # The movers step after the robot, from where it is and how it moves now.
             pose = self.pose()
@@ -181,12 +186,28 @@ class World:
         position, orientation = self.robot.link_pose()
         return Pose2D(position[0], position[1], yaw_of(orientation))
 
-    def touching(self) -> list[int]:
-        """Ids of the bodies other than the floor that the robot touches now."""
-        robot, floor = self.robot.id, self.warehouse.floor
+    def _bodies_near(self, speed: float) -> list[int]:
+        """The bodies but the floor that come within the robot's reach this control period: a
+        square around it, as wide as the robot and the farthest it can travel, meets their bounding
+        boxes (one broadphase query). No other body can be touched before the period ends, so the
+        sub-steps ask Bullet for contacts with these alone, if any: a contact query for the whole
+        robot every sub-step (its wheels' on the floor included) took a sixth of the step."""
+        x, y, _ = self.pose()
+        reach = ROBOT_REACH + speed * self.period + REACH_MARGIN
+        overlapping = p.getOverlappingObjects((x - reach, y - reach, -0.1), (x + reach, y + reach, 2.0),
+                                              physicsClientId=self.client) or ()
+        skip = (self.robot.id, self.warehouse.floor)
+        return sorted({body for body, _ in overlapping if body not in skip})
+
+    def touching(self, bodies: list[int] | None = None) -> list[int]:
+        """Ids of the bodies other than the floor that the robot touches now (among ``bodies``, if given)."""
+        robot, client = self.robot.id, self.client
+        if bodies is not None:
+            return [body for body in bodies
+                    if any(point[8] < TOUCH_DISTANCE for point in p.getContactPoints(robot, body, physicsClientId=client))]
         others = {point[2] if point[1] == robot else point[1]
-                  for point in p.getContactPoints(robot, physicsClientId=self.client) if point[8] < TOUCH_DISTANCE}
-        others.discard(floor)
+                  for point in p.getContactPoints(robot, physicsClientId=client) if point[8] < TOUCH_DISTANCE}
+        others.discard(self.warehouse.floor)
         return sorted(others)
 
     def _contact(self, touched: list[int]) -> Contact | None:

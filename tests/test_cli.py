@@ -71,6 +71,7 @@ def test_bench_json_has_the_agreed_keys(capsys, monkeypatch, tmp_path):
     assert results["warehouse_env_steps_per_s"] > 0 and results["ppo_steps_per_s_cluttered"] > 0
     assert 0 < results["ppo_rollout_share_sparse"] < 1
     assert results["ppo_steps_per_s_cluttered_subproc"] > 0 and results["ppo_subproc_vs_dummy"] > 0
+    assert results["movers_vs_static"] > 0 and results["physics3d_movers_vs_static"] > 0
 
 
 def test_bench_takes_the_faster_of_two_alternated_ppo_runs_of_each_setting(monkeypatch):

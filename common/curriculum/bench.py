@@ -347,14 +347,15 @@ def reset_ms(repeats: int = 30) -> dict[str, float]:
     return figures
 
 
-def moving_bench_scenario(people: int = 20, speed: float = 1.0) -> Scenario:
+def moving_bench_scenario(people: int = 20, speed: float = 1.0, template: Scenario | None = None) -> Scenario:
     """The moving benchmark world: the first eval ``crowd`` of difficulty 1 (20 people under the
     social force, planning as one group, seeing the robot), every person at ``speed`` and walking
     back and forth to its first goal, so that IR-SIM runs the same world (IR-SIM's group shares one
-    speed, and each simulator would draw a wanderer's next goals from its own generator)."""
+    speed, and each simulator would draw a wanderer's next goals from its own generator); the first
+    ``people`` of them, drawn around ``template``'s robot and lidar if given."""
     from common.generators import generate
 
-    crowd = generate("crowd", 0, 1.0, "eval", reacting=True, behavior="sfm")
+    crowd = generate("crowd", 0, 1.0, "eval", template, reacting=True, behavior="sfm")
     walkers = [person.model_copy(update={"motion": person.motion.model_copy(update={
         "wander": None, "route": "back_and_forth", "vel_max": (speed, speed),
         "behavior": person.motion.behavior.model_copy(update={"vmax": speed})})}) for person in crowd.movers[:people]]
@@ -385,6 +386,22 @@ def movers_figures(steps: int) -> dict[str, Any]:
             "movers_flatland_vs_irsim": None if theirs is None else round(flat / theirs, 1)}
 
 
+def movers3d_figures(steps: int) -> dict[str, Any]:
+    """The 3D env among 10 walking people against the same world frozen (each setting's faster of
+    two alternated runs)."""
+    from physics3d.robot import TEMPLATE
+
+    moving = moving_bench_scenario(people=10, template=TEMPLATE)
+    still = frozen(moving)
+    runs: dict[str, list[float]] = {"moving": [], "frozen": []}
+    for _ in range(2):
+        runs["moving"].append(physics3d_steps_per_s(moving, steps)[0])
+        runs["frozen"].append(physics3d_steps_per_s(still, steps)[0])
+    flat, static = max(runs["moving"]), max(runs["frozen"])
+    return {"physics3d_movers_steps_per_s": round(flat, 1), "physics3d_movers_frozen_steps_per_s": round(static, 1),
+            "physics3d_movers_vs_static": round(flat / static, 3)}
+
+
 def run_benchmarks(steps: int = 20_000) -> dict[str, Any]:
     """All figures of this milestone, as one flat mapping."""
     scenario = bench_scenario()
@@ -410,6 +427,7 @@ def run_benchmarks(steps: int = 20_000) -> dict[str, Any]:
         **irsim_circle_world_figures(steps),
         "warehouse_env_steps_per_s": round(flatland_steps_per_s("warehouse", max(500, steps // 4)), 1),
         **movers_figures(max(1000, steps // 4)),
+        **movers3d_figures(max(250, steps // 40)),
         **_ppo_figures(max(2048, steps)),
     }
 
