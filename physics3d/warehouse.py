@@ -33,9 +33,10 @@ _COLOURS = {
     "pillar": (0.95, 0.80, 0.15, 1.0),
     "polygon": (0.45, 0.60, 0.45, 1.0),
     "segment": (0.40, 0.40, 0.45, 1.0),
-    # Movers, by their label: people in blue, forklifts in safety orange, carts and the rest in grey.
-    "person": (0.20, 0.35, 0.80, 1.0),
-    "forklift": (0.95, 0.50, 0.05, 1.0),
+    # Movers, by their label: people in purple, forklifts in red (apart from the orange shelving, the
+    # yellow pillars and the blue robot), carts and the rest in greys and violets.
+    "person": (0.60, 0.25, 0.80, 1.0),
+    "forklift": (0.85, 0.12, 0.10, 1.0),
     "cart": (0.55, 0.55, 0.60, 1.0),
     "robot": (0.30, 0.70, 0.70, 1.0),
     "obstacle": (0.60, 0.30, 0.60, 1.0),

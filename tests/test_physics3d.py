@@ -505,6 +505,16 @@ _GUI_SMOKE = textwrap.dedent("""
         env.step(env.action_space.sample())
     assert env.unwrapped._overlay.frames == 26
     env.close()
+    from common.generators import generate
+    from physics3d.robot import TEMPLATE
+    crowd = generate("crowd", 0, 0.6, "eval", TEMPLATE)  # a second GUI window, among people
+    env = gym.make("physics3d/WarehouseNav-v0", world=crowd, render_mode="human")
+    env.reset(seed=0)
+    start = env.unwrapped.readings.movers.rows[:, :2].copy()
+    for _ in range(10):
+        env.step(env.action_space.sample())
+    assert abs(env.unwrapped.readings.movers.rows[:, :2] - start).max() > 0.3
+    env.close()
     print("gui ok")
 """)
 

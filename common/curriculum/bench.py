@@ -254,22 +254,28 @@ def physics3d_steps_per_s(scenario: Scenario, steps: int = 2_000, seed: int = 0)
 def gui_figures(steps: int = 300, seed: int = 0) -> dict[str, float]:
     """The PyBullet GUI (``render_mode="human"``, its previews and debug drawing on) under random
     actions: steps per second against real time (one control period per step, which the GUI
-    paces to), so ``gui_vs_real_time`` 1.0 means it keeps real time. Needs an X display."""
+    paces to), so ``gui_vs_real_time`` 1.0 means it keeps real time; then the same among 10
+    walking people (``gui_movers_vs_real_time``). Needs an X display."""
     if not os.environ.get("DISPLAY"):
         raise ConfigError(None, "--gui", "needs an X display (DISPLAY is not set); run it as: xvfb-run -a curriculum bench --gui")
     import gymnasium as gym
 
     import physics3d  # noqa: F401  (registers the env)
 
+    from physics3d.robot import TEMPLATE
+
+    figures: dict[str, float] = {}
+    worlds = (("gui", physics3d_bench_scenario()), ("gui_movers", moving_bench_scenario(people=10, template=TEMPLATE)))
+    actions = np.random.default_rng(seed).uniform(-1.0, 1.0, (steps, 2)).astype(np.float32)
     with _stdout_to_stderr():
-        env = gym.make("physics3d/WarehouseNav-v0", world=physics3d_bench_scenario(), observation="lidar43",
-                       render_mode="human")
-        actions = np.random.default_rng(seed).uniform(-1.0, 1.0, (steps, 2)).astype(np.float32)
-        elapsed = _timed_random_drive(env, actions, seed)
-        real_time = 1.0 / env.unwrapped.world.period
-        env.close()
-    return {"gui_steps_per_s": round(steps / elapsed, 2), "gui_real_time_steps_per_s": real_time,
-            "gui_vs_real_time": round(steps / elapsed / real_time, 3)}
+        for name, world in worlds:  # one GUI window a process: one env at a time
+            env = gym.make("physics3d/WarehouseNav-v0", world=world, observation="lidar43", render_mode="human")
+            elapsed = _timed_random_drive(env, actions, seed)
+            real_time = 1.0 / env.unwrapped.world.period
+            env.close()
+            figures[f"{name}_steps_per_s"] = round(steps / elapsed, 2)
+            figures[f"{name}_vs_real_time"] = round(steps / elapsed / real_time, 3)
+    return {"gui_real_time_steps_per_s": real_time, **figures}
 
 
 def bare_pybullet_steps_per_s(scenario: Scenario, steps: int = 2_000, seed: int = 0, resets: Sequence[int] = ()) -> float:
