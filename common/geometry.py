@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba.extending import register_jitable
 
 from common.kernel_cache import kernel
 from common.polygons import orientation
@@ -164,3 +165,13 @@ def segment_box_gap(ax: float, ay: float, bx: float, by: float, cx: float, cy: f
                    (half_length, -half_width)):
         gap = min(gap, segment_distance(kx, ky, ux, uy, vx, vy))
     return gap
+
+
+@register_jitable
+def sensor_origin(x: float, y: float, yaw: float, mount_x: float, mount_y: float) -> tuple[float, float]:
+    """Where a sensor mounted at (mount_x, mount_y) in the robot frame is, for a robot pose."""
+    if mount_x == 0.0 and mount_y == 0.0:
+        return x, y  # the common mount, on the robot's centre: no trigonometry in the step
+    c, s = math.cos(yaw), math.sin(yaw)
+    return x + c * mount_x - s * mount_y, y + s * mount_x + c * mount_y
+

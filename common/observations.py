@@ -66,6 +66,7 @@ import numpy as np
 from gymnasium import spaces
 
 from common.errors import ConfigError, quote
+from common.geometry import sensor_origin
 from common.kernel_cache import kernel
 from common.kinematics import wrap_angle
 from common.readings import Readings
@@ -196,9 +197,9 @@ def _still_world_ranges(previous, x0, y0, t0, x1, y1, t1, mount, a0, step, wrap,
     out[:] = np.nan
     if n < 2:
         return
-    mx, my, myaw = mount[0], mount[1], mount[2]
-    sx0, sy0 = x0 + math.cos(t0) * mx - math.sin(t0) * my, y0 + math.sin(t0) * mx + math.cos(t0) * my
-    sx1, sy1 = x1 + math.cos(t1) * mx - math.sin(t1) * my, y1 + math.sin(t1) * mx + math.cos(t1) * my
+    myaw = mount[2]
+    sx0, sy0 = sensor_origin(x0, y0, t0, mount[0], mount[1])
+    sx1, sy1 = sensor_origin(x1, y1, t1, mount[0], mount[1])
     bearing, reach = np.empty(n), np.empty(n)
     for k in range(n):
         if previous[k] >= range_max:  # a miss says "nothing within range" along its own beam

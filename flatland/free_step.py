@@ -12,10 +12,11 @@ from __future__ import annotations
 import numpy as np
 from numba.extending import register_jitable
 
+from common.geometry import sensor_origin
 from common.kernel_cache import kernel
 from common.kinematics import Pose2D, body_velocity, unicycle_euler, unicycle_exact, wheel_speeds
 from flatland.clearance import path_clear, swept_capsule
-from flatland.lidar import cast_scan, sensor_origin
+from flatland.lidar import cast_scan
 
 
 def step_constants(*, step_time: float, exact: bool, sweep_radius: float, wheel_radius: float, wheel_base: float,

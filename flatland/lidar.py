@@ -11,9 +11,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba.extending import register_jitable
 
-from common.geometry import slab
+from common.geometry import sensor_origin, slab
 from common.kernel_cache import kernel
 from common.scenario import LidarSpec
 
@@ -199,12 +198,3 @@ class Lidar:
             np.minimum(ranges, spec.range_max, out=ranges)
         np.maximum(ranges, spec.range_min, out=ranges)  # a floor, or noise that may dip below 0
         return ranges
-
-
-@register_jitable
-def sensor_origin(x: float, y: float, yaw: float, mount_x: float, mount_y: float) -> tuple[float, float]:
-    """Where a sensor mounted at (mount_x, mount_y) in the robot frame is, for a robot pose."""
-    if mount_x == 0.0 and mount_y == 0.0:
-        return x, y  # the common mount, on the robot's centre: no trigonometry in the step
-    c, s = math.cos(yaw), math.sin(yaw)
-    return x + c * mount_x - s * mount_y, y + s * mount_x + c * mount_y

@@ -227,7 +227,6 @@ class RandomAgent:
 
 @pytest.mark.slow
 def test_short_ppo_training_beats_a_random_policy_and_round_trips(tmp_path):
-    import gymnasium as gym
     import torch
     from stable_baselines3 import PPO
 

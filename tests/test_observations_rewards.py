@@ -182,7 +182,7 @@ def test_the_env_observes_through_odometry_not_the_true_pose():
     for _ in range(40):
         observation, *_ = env.step(np.array([0.5, 0.4], dtype=np.float32))
     readings = env.unwrapped.readings
-    (x, y, yaw), (tx, ty, tyaw) = readings.odometry.pose, readings.pose
+    (x, y, yaw), (tx, ty, _) = readings.odometry.pose, readings.pose
     assert math.dist((x, y), (tx, ty)) > 0.05  # the noise has made them differ
     heading = math.atan2(8.0 - y, 8.0 - x)
     assert observation[2] == pytest.approx(math.remainder(heading - yaw, 2 * math.pi) / math.pi, abs=1e-6)
@@ -218,7 +218,7 @@ def test_the_default_reward_pays_for_reaching_the_goal():
 
     env = _flat_env(Scenario(start=(3.0, 3.0, math.pi / 4), goal=(7.0, 7.0)), max_steps=200)
     env.reset(seed=0)
-    total, shares = 0.0, {}
+    total = 0.0
     for _ in range(200):
         _, reward, terminated, _, info = env.step(np.array([1.0, 0.0], dtype=np.float32))
         total += reward
