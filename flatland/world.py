@@ -78,8 +78,8 @@ class World:
         self.rng = np.random.default_rng(seed) if rng is None else rng
         # The movers draw from a stream of their own, so that a seed moves them alike in every tier
         # whatever else a tier draws (the 3D tier's sensor noise); an IR-SIM file's movers draw from
-        # its generator, in IR-SIM's order.
-        self._one_stream = rng is not None
+        # the generator its parse drew from, in IR-SIM's order.
+        self._one_stream = rng is not None and scenario.kind == "irsim"
         self.mover_rng = self.rng if self._one_stream else mover_generator(seed)
         robot = scenario.robot
         first_order = self.conditions.dynamics == "first_order"

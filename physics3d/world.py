@@ -35,7 +35,7 @@ SETTLE_SUBSTEPS = 24  # at build: let the robot sink into its contacts before th
 # separate by 2 cm, so a robot that has just slid past a box still lists it for a few sub-steps.
 TOUCH_DISTANCE = 1e-3  # m
 # The robot's reach from its centre (half its 0.3 x 0.22 m footprint's diagonal, wheels included,
-# rounded up), and what a period's travel may exceed its driven speed by (a bump, a push).
+# rounded up), and a margin beyond its travel in a period.
 ROBOT_REACH, REACH_MARGIN = 0.25, 0.1  # m
 
 
@@ -147,7 +147,7 @@ class World:
         if self.movers is not None:
             self.movers.reset(self.pose())
             p.performCollisionDetection(physicsClientId=self.client)
-        self.readings = self._read(0.0, self._contact(self.touching()))
+        self.readings = self._read(0.0, self.touching())
         return self.readings
 
     def step(self, v: float, w: float) -> Readings:
@@ -165,11 +165,16 @@ class World:
             # Draw the end of the period, not each sub-step: drawing 24 frames a period is what
             # held the GUI at a third of real time on a software renderer.
             p.configureDebugVisualizer(p.COV_ENABLE_RENDERING, 0, physicsClientId=self.client)
-        near = self._bodies_near(max(abs(v), abs(self.readings.velocity[0])))
+        near = self._bodies_near(max(abs(v), math.hypot(*self.robot.velocity()[0][:2])))
+        movers = set() if self.movers is None else set(self.movers.row_of)
+        walls = [body for body in near if body not in movers]
         for _ in range(self.substeps):
             p.stepSimulation(physicsClientId=self.client)
             if near and not touched:
                 touched = self.touching(near)
+            elif walls and not set(touched) - movers:
+                # Static geometry touched later in the period still comes first, as in flatland.
+                touched = self.touching(walls) + touched
         if self.movers is not None:
             # The movers step after the robot, from where it is and how it moves now.
             pose = self.pose()
@@ -178,7 +183,7 @@ class World:
         if self.gui:
             p.configureDebugVisualizer(p.COV_ENABLE_RENDERING, 1, physicsClientId=self.client)
         self.steps += 1
-        self.readings = self._read(self.period, self._contact(touched))
+        self.readings = self._read(self.period, touched)
         return self.readings
 
     def pose(self) -> Pose2D:
@@ -188,12 +193,14 @@ class World:
 
     def _bodies_near(self, speed: float) -> list[int]:
         """The bodies but the floor that come within the robot's reach this control period: a
-        square around it, as wide as the robot and the farthest it can travel, meets their bounding
-        boxes (one broadphase query). No other body can be touched before the period ends, so the
-        sub-steps ask Bullet for contacts with these alone, if any: a contact query for the whole
-        robot every sub-step (its wheels' on the floor included) took a sixth of the step."""
+        square around it, as wide as the robot and twice as far as it travels at ``speed`` (the
+        faster of its command and its velocity now) and 0.1 m more, meets their bounding boxes (one
+        broadphase query). Nothing moves the robot faster within one period but a collision with
+        one of them, so the sub-steps ask Bullet for contacts with these alone, if any: a contact
+        query for the whole robot every sub-step (its wheels' on the floor included) took a sixth
+        of the step."""
         x, y, _ = self.pose()
-        reach = ROBOT_REACH + speed * self.period + REACH_MARGIN
+        reach = ROBOT_REACH + 2.0 * speed * self.period + REACH_MARGIN
         overlapping = p.getOverlappingObjects((x - reach, y - reach, -0.1), (x + reach, y + reach, 2.0),
                                               physicsClientId=self.client) or ()
         skip = (self.robot.id, self.warehouse.floor)
@@ -203,8 +210,8 @@ class World:
         """Ids of the bodies other than the floor that the robot touches now (among ``bodies``, if given)."""
         robot, client = self.robot.id, self.client
         if bodies is not None:
-            return [body for body in bodies
-                    if any(point[8] < TOUCH_DISTANCE for point in p.getContactPoints(robot, body, physicsClientId=client))]
+            return [body for body in bodies if any(point[8] < TOUCH_DISTANCE
+                                                   for point in p.getContactPoints(robot, body, physicsClientId=client))]
         others = {point[2] if point[1] == robot else point[1]
                   for point in p.getContactPoints(robot, physicsClientId=client) if point[8] < TOUCH_DISTANCE}
         others.discard(self.warehouse.floor)
@@ -213,7 +220,9 @@ class World:
     def _contact(self, touched: list[int]) -> Contact | None:
         """What the robot touched (``touched``: body ids), as flatland reports it: static geometry
         first, else the first mover; None for nothing."""
-        rows = [] if self.movers is None else [self.movers.row_of[b] for b in touched if b in self.movers.row_of]
+        if self.movers is None:
+            return None  # as in flatland: a world without movers reports only that it collided
+        rows = [self.movers.row_of[b] for b in touched if b in self.movers.row_of]
         if not touched:
             return None
         if len(rows) < len(touched):
@@ -227,7 +236,8 @@ class World:
         linear, _ = self.robot.velocity()
         return linear[0] * math.cos(yaw) + linear[1] * math.sin(yaw)
 
-    def _read(self, dt: float, contact: Contact | None) -> Readings:
+    def _read(self, dt: float, touched: list[int]) -> Readings:
+        contact = self._contact(touched)
         position, orientation = self.robot.link_pose()
         yaw = yaw_of(orientation)
         linear, angular = self.robot.velocity()
@@ -248,7 +258,7 @@ class World:
             odometry=Odometry(odometry.pose, odometry.v, odometry.w),
             lidar=frozen(self.lidar.scan(position[0], position[1], position[2], yaw)),
             imu=self.imu.read(orientation, linear, angular, dt),
-            collided=contact is not None,
+            collided=bool(touched),
             time=self.steps * self.period,
             camera=camera,
             movers=None if self.movers is None else self.movers.states(),

@@ -207,17 +207,20 @@ def test_too_many_movers_and_mixed_groups_are_refused():
         scenario_from_mapping({"obstacles": [orca, sfm]})
 
 
-def test_a_reset_starts_the_same_episode_again_from_the_same_start_and_a_new_one_from_another():
+@pytest.mark.parametrize(("kind", "options"), [("crowd", {"behavior": "sfm"}), ("crowd", {"behavior": "orca"}),
+                                               ("warehouse_moving", {})])
+def test_a_reset_starts_the_same_episode_again_from_the_same_start_and_a_new_one_from_another(kind, options):
+    # Movers who see the robot: a social-force crowd, an ORCA one, forklifts (boxes) and people.
     from common.generators import generate
     from common.motion.movers import Movers
 
-    crowd = generate("crowd", 0, 1.0, "eval", reacting=True, behavior="sfm")  # people who see the robot
+    crowd = generate(kind, 0, 1.0, "eval", reacting=True, **options)
 
     def episode(movers: Movers, pose) -> np.ndarray:
-        """What the first readings see (states, lidar circles), then the movers' poses each step."""
+        """What the first readings see (states, the lidar's circles and boxes), then the movers' poses each step."""
         movers.reset(pose)
         rng = np.random.default_rng(0)  # the wanderers' next goals
-        seen = [movers.states().rows.ravel(), movers.visible()[0].copy().ravel()]
+        seen = [movers.states().rows.ravel(), *(rows.copy().ravel() for rows in movers.visible())]
         for k in range(60):
             movers.finish((pose[0] + 0.02 * k, pose[1], pose[2]), 0.2, 0.0, False, rng)
             seen.append(movers.states().rows[:, :3].ravel())
@@ -231,3 +234,21 @@ def test_a_reset_starts_the_same_episode_again_from_the_same_start_and_a_new_one
     assert np.array_equal(elsewhere, episode(Movers(crowd), there))
     assert not np.array_equal(elsewhere, first)
     assert np.array_equal(episode(movers, here), first)
+
+
+def test_a_project_file_moves_its_wanderers_as_its_scenario_does_in_any_world(tmp_path):
+    # The movers draw from a stream of their own: loaded from its file or built from its scenario,
+    # and whatever else the world draws from the seed (its sensors' noise here), a seed moves the
+    # wanderers alike. (An IR-SIM file's draw from the generator its parse drew from, as IR-SIM's.)
+    import flatland
+
+    scenario = world_of(person(5.0, 5.0, [(6.0, 5.0)], wander=(1.0, 1.0, 9.0, 9.0), goal_threshold=0.2)).scenario
+    scenario = scenario.model_copy(update={"lidar": scenario.lidar.model_copy(update={"noise_std": 0.05})})
+    path = tmp_path / "wanderer.yaml"
+    path.write_text(scenario.to_yaml())
+
+    def path_of(world) -> np.ndarray:
+        world.reset()
+        return np.array([world.step(0.0, 0.0).movers.rows[0, :2] for _ in range(200)])
+
+    assert np.array_equal(path_of(flatland.load_world(path, seed=3)), path_of(World(scenario, seed=3)))

@@ -50,7 +50,7 @@ def test_movers_blind_to_the_robot_move_in_3d_exactly_as_in_flatland(suite):
     # the 3D tier draws besides (its sensors' noise, the per-episode imperfections).
     kind = "crowd" if suite == "crowd_unaware" else "warehouse_moving"
     scenario = generate(kind, 4, 0.6, "eval", reacting=False)
-    flat, solid = FlatWorld(scenario, seed=1), World(scenario, seed=1)
+    flat, solid = FlatWorld(scenario, seed=1, conditions=Conditions(robot="physics3d")), World(scenario, seed=1)
     first = flat.reset(seed=11).movers.rows, solid.reset(seed=11).movers.rows
     assert np.array_equal(*first)
     for _ in range(120):
@@ -73,7 +73,7 @@ def test_movers_that_see_the_robot_move_by_the_shared_code_from_its_3d_path(monk
     world = World(scenario, seed=0)
     start = world.reset(seed=5)
     seen = [world.step(0.6, 0.1 * math.sin(0.1 * k)).movers.rows for k in range(80)]
-    replay, rng = Movers(scenario), mover_generator(5)
+    replay, rng = Movers(world.scenario), mover_generator(5)  # the scenario as the 3D tier runs it: its robot
     replay.reset(start.pose)
     for (pose, v, w), rows in zip(inputs, seen):
         replay.finish(pose, v, w, False, rng)
@@ -112,7 +112,7 @@ def test_driving_into_a_standing_forklift_is_the_robots_doing_and_into_a_box_sta
     world.reset()
     contacts = [world.step(0.5, 0.0).contact for _ in range(40)]
     assert next(c for c in contacts if c is not None) == ("mover", 0, "robot")
-    world = world_of(BoxObstacle(x=7.0, y=5.0, length=1.0, width=0.6))
+    world = world_of(BoxObstacle(x=7.0, y=5.0, length=1.0, width=0.6), person(2.0, 2.0, (2.0, 2.0)))
     world.reset()
     contacts = [world.step(0.5, 0.0).contact for _ in range(40)]
     assert next(c for c in contacts if c is not None) == ("static", -1, "robot")

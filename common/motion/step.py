@@ -227,7 +227,7 @@ def _plan_sfm(F, I, params, goals, objects, segments, members, inside, dt, neigh
 def _group_desire(F, I, goals, params, m):  # noqa: E741
     """A group member's desired velocity: ``vmax`` toward its goal, none within 0.1 m of it. IR-SIM
     takes the cosine and sine of the bearing at the mover's speeds and rescales them to ``vmax``;
-    where both speeds are one (a diff mover's always are) that is the unit vector to the goal to
+    where the two speeds are equal (a diff mover's always are) that is the unit vector to the goal to
     within rounding, which the batched model's figures carry anyway, at a fraction of the cost."""
     speed_y = F[m, VMAX0] if I[m, KINEMATICS] == DIFF else F[m, VMAX1]
     if F[m, VMAX0] != speed_y or speed_y <= 0.0:
