@@ -152,7 +152,6 @@ class Lidar:
                  rng: np.random.Generator) -> None:
         self.spec = spec
         self._limited = spec.noise_std > 0.0 or spec.range_min > 0.0  # whether finish() has anything to do
-        self._centred = spec.offset[0] == 0.0 and spec.offset[1] == 0.0  # mounted on the robot's centre
         self.place(circles, boxes, segments)
         self.rng = rng
         angles = spec.beam_angles()
@@ -167,8 +166,6 @@ class Lidar:
 
     def origin(self, x: float, y: float, yaw: float) -> tuple[float, float]:
         """The sensor's position for a robot pose."""
-        if self._centred:
-            return x, y
         mount_x, mount_y, _ = self.spec.offset
         return sensor_origin(x, y, yaw, mount_x, mount_y)
 

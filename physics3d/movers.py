@@ -31,7 +31,6 @@ class MovingBodies:
         self.bodies = [by_obstacle[int(table.obstacle_index[m])] for m in rows]
         self.heights = [0.5 * scenario.obstacles[int(table.obstacle_index[m])].height for m in rows]
         self.row_of = {body: k for k, body in enumerate(self.bodies)}  # a body's row in the states
-        self.draws = self.movers.draws
 
     def reset(self, pose: tuple[float, float, float]) -> None:
         """Every mover back at its start (the robot at ``pose``)."""
