@@ -5,6 +5,7 @@ segmentation camera, and an IMU. Every noise draw comes from the world's seeded 
 from __future__ import annotations
 
 import math
+import operator
 from typing import Sequence
 
 import numpy as np
@@ -17,6 +18,9 @@ GRAVITY = 9.81
 
 Vector = Sequence[float]
 Quaternion = Sequence[float]
+
+
+_HIT_FRACTION = operator.itemgetter(2)  # of a rayTestBatch result: the hit's fraction of the ray
 
 
 class Lidar:
@@ -35,7 +39,8 @@ class Lidar:
         self.height = height
         self.rng = rng
         angles = spec.beam_angles() + spec.offset[2]
-        self._cos, self._sin = np.cos(angles), np.sin(angles)
+        # Each beam's reach in the base frame, (N, 3): one product with the yaw's rotation places them.
+        self._reach = spec.range_max * np.column_stack((np.cos(angles), np.sin(angles), np.zeros_like(angles)))
         self._from = np.empty((spec.beams, 3))
         self._to = np.empty((spec.beams, 3))
         self._mask = 0xFFFF & ~exclude_group
@@ -46,24 +51,23 @@ class Lidar:
         mx, my, _ = self.spec.offset
         c, s = math.cos(yaw), math.sin(yaw)
         origin = (x + c * mx - s * my, y + s * mx + c * my, z + self.height)
-        reach = self.spec.range_max
         self._from[:] = origin
-        self._to[:, 0] = origin[0] + reach * (c * self._cos - s * self._sin)
-        self._to[:, 1] = origin[1] + reach * (s * self._cos + c * self._sin)
-        self._to[:, 2] = origin[2]
+        np.matmul(self._reach, ((c, s, 0.0), (-s, c, 0.0), (0.0, 0.0, 1.0)), out=self._to)
+        self._to += origin
         return self._from, self._to
 
     def scan(self, x: float, y: float, z: float, yaw: float) -> np.ndarray:
         """Ranges in beam order (a new array each call), clipped to [range_min, range_max]."""
         hits = p.rayTestBatch(*self.rays(x, y, z, yaw), collisionFilterMask=self._mask, physicsClientId=self.client)
         spec = self.spec
-        ranges = np.fromiter((hit[2] for hit in hits), float, spec.beams)
+        ranges = np.fromiter(map(_HIT_FRACTION, hits), float, spec.beams)
         ranges *= spec.range_max
         if spec.noise_std > 0.0:
             # Only returns carry noise; a beam that hit nothing keeps reading range_max, as in flatland.
             returns = ranges < spec.range_max
             ranges[returns] += self.rng.normal(0.0, spec.noise_std, int(returns.sum()))
-        return np.clip(ranges, spec.range_min, spec.range_max, out=ranges)
+        np.maximum(ranges, spec.range_min, out=ranges)
+        return np.minimum(ranges, spec.range_max, out=ranges)
 
 
 class Camera:

@@ -22,7 +22,7 @@ from common.motion.movers import mover_generator
 from common.readings import Contact, Odometry, Readings, frozen, mover_fault
 from common.scenario import Scenario
 from physics3d.robot import ROBOT_COLLISION_GROUP, WHEEL_BASE, WHEEL_RADIUS, Robot, yaw_of
-from physics3d.sensors import GRAVITY, Camera, Imu, Lidar
+from physics3d.sensors import GRAVITY, Camera, Imu, Lidar, Quaternion, Vector
 from physics3d.movers import MovingBodies
 from physics3d.warehouse import Tag, Warehouse, build
 
@@ -37,6 +37,16 @@ TOUCH_DISTANCE = 1e-3  # m
 # The robot's reach from its centre (half its 0.3 x 0.22 m footprint's diagonal, wheels included,
 # rounded up), and a margin beyond its travel in a period.
 ROBOT_REACH, REACH_MARGIN = 0.25, 0.1  # m
+# How near the robot may come to a body before contacts with it are polled: well above the touch
+# distance and Bullet's error in a closest distance.
+CONTACT_SLACK = 0.02  # m
+# The robot's body frame (position, orientation) and its base's (linear, angular) velocity.
+BodyState = tuple[tuple[Vector, Quaternion], tuple[Vector, Vector]]
+
+
+def _speed_along(linear: Vector, yaw: float) -> float:
+    """The speed of a body moving at ``linear`` (world frame) along heading ``yaw``."""
+    return linear[0] * math.cos(yaw) + linear[1] * math.sin(yaw)
 
 
 def refuse_unmodelled(scenario: Scenario) -> None:
@@ -147,7 +157,7 @@ class World:
         if self.movers is not None:
             self.movers.reset(self.pose())
             p.performCollisionDetection(physicsClientId=self.client)
-        self.readings = self._read(0.0, self.touching())
+        self.readings = self._read(0.0, self.touching(), (self.robot.link_pose(), self.robot.velocity()))
         return self.readings
 
     def step(self, v: float, w: float) -> Readings:
@@ -165,25 +175,29 @@ class World:
             # Draw the end of the period, not each sub-step: drawing 24 frames a period is what
             # held the GUI at a third of real time on a software renderer.
             p.configureDebugVisualizer(p.COV_ENABLE_RENDERING, 0, physicsClientId=self.client)
-        near = self._bodies_near(max(abs(v), math.hypot(*self.robot.velocity()[0][:2])))
+        near, first = self._bodies_near(max(abs(v), self._planar_speed), max(abs(w), abs(self.readings.velocity[1])))
         movers = set() if self.movers is None else set(self.movers.row_of)
         walls = [body for body in near if body not in movers]
-        for _ in range(self.substeps):
+        for substep in range(self.substeps):
             p.stepSimulation(physicsClientId=self.client)
-            if near and not touched:
+            if substep < first:
+                continue
+            if not touched:
                 touched = self.touching(near)
             elif walls and not set(touched) - movers:
                 # Static geometry touched later in the period still comes first, as in flatland.
                 touched = self.touching(walls) + touched
+        state = self.robot.link_pose(), self.robot.velocity()
         if self.movers is not None:
             # The movers step after the robot, from where it is and how it moves now.
-            pose = self.pose()
-            self.movers.finish(pose, self._speed(pose.yaw), self.robot.velocity()[1][2], self.mover_rng)
+            (position, orientation), (linear, angular) = state
+            yaw = yaw_of(orientation)
+            self.movers.finish(Pose2D(position[0], position[1], yaw), _speed_along(linear, yaw), angular[2], self.mover_rng)
             touched = touched or self.touching()
         if self.gui:
             p.configureDebugVisualizer(p.COV_ENABLE_RENDERING, 1, physicsClientId=self.client)
         self.steps += 1
-        self.readings = self._read(self.period, touched)
+        self.readings = self._read(self.period, touched, state)
         return self.readings
 
     def pose(self) -> Pose2D:
@@ -191,20 +205,36 @@ class World:
         position, orientation = self.robot.link_pose()
         return Pose2D(position[0], position[1], yaw_of(orientation))
 
-    def _bodies_near(self, speed: float) -> list[int]:
-        """The bodies but the floor that come within the robot's reach this control period: a
-        square around it, as wide as the robot and twice as far as it travels at ``speed`` (the
-        faster of its command and its velocity now) and 0.1 m more, meets their bounding boxes (one
-        broadphase query). Nothing moves the robot faster within one period but a collision with
-        one of them, so the sub-steps ask Bullet for contacts with these alone, if any: a contact
-        query for the whole robot every sub-step (its wheels' on the floor included) took a sixth
-        of the step."""
-        x, y, _ = self.pose()
-        reach = ROBOT_REACH + 2.0 * speed * self.period + REACH_MARGIN
+    def _bodies_near(self, speed: float, turn_rate: float) -> tuple[list[int], int]:
+        """The bodies but the floor that the robot can touch this control period, and the first
+        sub-step (counted from 0) at which it can touch any of them (``substeps``: none).
+
+        Within a period nothing moves the robot faster than twice its ``speed`` (the faster of its
+        command and its velocity now) plus the sweep of its corners at twice ``turn_rate`` (the
+        same for its turn rate), but a collision with one of these bodies. A broadphase query
+        (bounding boxes against a square round the robot) names the candidates, one exact
+        closest-distance query each keeps those within that travel and 0.1 m, and the nearest of
+        them tells how many sub-steps pass before the robot could close the gap but 2 cm. So the
+        sub-steps ask Bullet for contacts with these alone, and only from then on: a contact query
+        for the whole robot every sub-step (its wheels' on the floor included) took a sixth of the
+        step, one per nearby box every sub-step a tenth."""
+        x, y, _ = self.readings.pose  # where the robot is: nothing has moved it since it was read
+        rate = 2.0 * (speed + turn_rate * ROBOT_REACH)  # m/s
+        bound = rate * self.period + REACH_MARGIN
+        reach = ROBOT_REACH + bound
+        robot, client, skip = self.robot.id, self.client, (self.robot.id, self.warehouse.floor)
         overlapping = p.getOverlappingObjects((x - reach, y - reach, -0.1), (x + reach, y + reach, 2.0),
-                                              physicsClientId=self.client) or ()
-        skip = (self.robot.id, self.warehouse.floor)
-        return sorted({body for body, _ in overlapping if body not in skip})
+                                              physicsClientId=client) or ()
+        near, gap = [], math.inf
+        for body in sorted({body for body, _ in overlapping if body not in skip}):
+            points = p.getClosestPoints(robot, body, bound, physicsClientId=client)
+            if points:
+                near.append(body)
+                gap = min(gap, *(point[8] for point in points))
+        if not near:
+            return near, self.substeps
+        closing = rate * self.period / self.substeps  # the most a sub-step can close the gap, m
+        return near, 0 if closing <= 0.0 else max(0, math.ceil((gap - CONTACT_SLACK) / closing) - 1)
 
     def touching(self, bodies: list[int] | None = None) -> list[int]:
         """Ids of the bodies other than the floor that the robot touches now (among ``bodies``, if given)."""
@@ -231,16 +261,13 @@ class World:
         # contact itself the body has already been stopped, or pushed back, by what it met.
         return Contact("mover", rows[0], mover_fault(self.pose(), self._driving, self.movers.states().rows[rows[0]]))
 
-    def _speed(self, yaw: float) -> float:
-        """The robot's true speed along its heading."""
-        linear, _ = self.robot.velocity()
-        return linear[0] * math.cos(yaw) + linear[1] * math.sin(yaw)
-
-    def _read(self, dt: float, touched: list[int]) -> Readings:
+    def _read(self, dt: float, touched: list[int], state: BodyState) -> Readings:
+        """The readings after a period ``dt`` in which the robot touched ``touched``, ending in
+        ``state``: the body frame's pose and the base's velocities, as read from Bullet."""
         contact = self._contact(touched)
-        position, orientation = self.robot.link_pose()
+        (position, orientation), (linear, angular) = state
         yaw = yaw_of(orientation)
-        linear, angular = self.robot.velocity()
+        self._planar_speed = math.hypot(linear[0], linear[1])
         if dt > 0.0:
             left, right = self.robot.wheel_angles()
             # The gyro is read whichever source the heading takes, so switching it changes no other draw.
@@ -254,7 +281,7 @@ class World:
         odometry = self.odometry
         return Readings(
             pose=Pose2D(position[0], position[1], yaw),
-            velocity=(self._speed(yaw), angular[2]),
+            velocity=(_speed_along(linear, yaw), angular[2]),
             odometry=Odometry(odometry.pose, odometry.v, odometry.w),
             lidar=frozen(self.lidar.scan(position[0], position[1], position[2], yaw)),
             imu=self.imu.read(orientation, linear, angular, dt),
