@@ -291,17 +291,21 @@ def _poll_everything(world: World, speed: float, turn_rate: float) -> tuple[list
 
 def _near_misses(polling, monkeypatch) -> list[list[bool]]:
     """Per drive, the collided flags of its control periods, contacts polled by ``polling``: six
-    0.2 s periods past a pillar that the robot's side overlaps by 1-20 mm, and four 0.1 s periods
-    head-on at a box from starts 1 cm apart (contact begins at every phase of a period)."""
+    0.2 s periods past a pillar that the robot's side overlaps by 1-20 mm, four 0.1 s periods
+    head-on at a box from starts 1 cm apart (contact begins at every phase of a period), and six
+    turning hard beside a box."""
     monkeypatch.setattr(World, "_bodies_near", polling)
-    drives = [(start, CircleObstacle(x=1.5, y=5.21 - overlap, radius=0.1), 0.2, 6)
+    drives = [(start, CircleObstacle(x=1.5, y=5.21 - overlap, radius=0.1), 0.2, 6, 0.5, 0.0)
               for start in np.linspace(0.9, 1.05, 4) for overlap in (0.001, 0.009, 0.02)]
-    drives += [(start, BoxObstacle(x=2.0, y=5.0, length=0.2, width=1.0), 0.1, 4) for start in np.linspace(1.55, 1.65, 11)]
+    drives += [(start, BoxObstacle(x=2.0, y=5.0, length=0.2, width=1.0), 0.1, 4, 0.5, 0.0)
+               for start in np.linspace(1.55, 1.65, 11)]
+    # Creeping while turning hard: the corners sweep into a box beside the robot far faster than it drives.
+    drives += [(1.0, BoxObstacle(x=1.0 + 0.02 * k, y=5.21, length=0.3, width=0.1), 0.1, 6, 0.02, 1.5) for k in range(6)]
     runs = []
-    for start, obstacle, period, steps in drives:
+    for start, obstacle, period, steps, v, w in drives:
         world = World(TEMPLATE.model_copy(update={"start": (float(start), 5.0, 0.0), "goal": (9.0, 5.0),
                                                   "obstacles": [obstacle]}), conditions=as_built(control_period=period))
-        runs.append([world.step(0.5, 0.0).collided for _ in range(steps)])
+        runs.append([world.step(v, w).collided for _ in range(steps)])
         world.close()
     return runs
 
@@ -314,7 +318,8 @@ def test_contacts_polled_near_bodies_only_are_seen_in_the_same_period(monkeypatc
     reference = _near_misses(_poll_everything, monkeypatch)
     assert fast == reference
     assert sum(any(run) for run in reference) >= 15  # the drives do touch
-    assert len({run.index(True) for run in reference[12:] if any(run)}) >= 2  # head-on: in different periods
+    assert len({run.index(True) for run in reference[12:23] if any(run)}) >= 2  # head-on: in different periods
+    assert sum(any(run) for run in reference[23:]) >= 3  # the corners do sweep into the box
 def test_driving_into_a_box_is_a_collision_and_the_floor_is_not():
     box = BoxObstacle(x=7.0, y=5.0, length=1.0, width=1.0)
     world = World(scenario(obstacles=[box]), conditions=as_built())
