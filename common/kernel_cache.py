@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Callable
 
 from numba import njit
+from numba.core.dispatcher import Dispatcher
 from numba.core.caching import CompileResultCacheImpl, FunctionCache, InTreeCacheLocator, UserWideCacheLocator
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -90,3 +91,12 @@ def cached_kernels(root: Path, modules: tuple[str, ...]) -> Callable:
 
 
 kernel = cached_kernels(ROOT, KERNEL_MODULES)
+
+
+def compiled_for(dispatcher: Dispatcher, *args) -> Callable:
+    """The machine code of ``dispatcher`` (a kernel) for arguments of the types of ``args``,
+    compiled or loaded from its cache now. Calling it skips the dispatcher's matching of every
+    argument's type to a compiled signature, which for a kernel of thirty-odd arguments costs
+    about as much as a crowd's whole social-force plan; so it may only be called with arguments
+    of exactly those types (arrays of the same dtype, layout and rank)."""
+    return dispatcher.compile(tuple(dispatcher.typeof_pyval(arg) for arg in args))

@@ -9,11 +9,12 @@ pymunk segment queries) would cost more than the rest of an env step.
 from __future__ import annotations
 
 import math
+from typing import Callable
 
 import numpy as np
 
 from common.geometry import sensor_origin, slab
-from common.kernel_cache import kernel
+from common.kernel_cache import compiled_for, kernel
 from common.scenario import LidarSpec
 
 _EPS = 1e-9  # a hit nearer than this is the sensor's own surface, not an obstacle
@@ -157,6 +158,7 @@ class Lidar:
         angles = spec.beam_angles()
         self.first_beam = float(angles[0]) + spec.offset[2]  # in the robot frame, mounting yaw included
         self.beam_step = float(angles[1] - angles[0]) if spec.beams > 1 else 0.0
+        self._scan_among: Callable | None = None  # cast_scan_among's machine code, once a scan needs it
 
     def place(self, circles: np.ndarray, boxes: np.ndarray, segments: np.ndarray) -> None:
         """Scan these primitives from now on (arrays as the constructor takes them)."""
@@ -179,8 +181,14 @@ class Lidar:
             cast_scan(ox, oy, yaw + self.first_beam, self.beam_step, self.circles, self.boxes, self.segments,
                       self.spec.range_max, ranges)
         else:
-            cast_scan_among(ox, oy, yaw + self.first_beam, self.beam_step, self.circles, self.boxes, self.segments,
-                            circles, boxes, self.spec.range_max, ranges)
+            # The machine code below takes exactly these types.
+            circles = np.ascontiguousarray(circles, dtype=np.float64).reshape(-1, 3)
+            boxes = np.ascontiguousarray(boxes, dtype=np.float64).reshape(-1, 6)
+            args = (ox, oy, yaw + self.first_beam, self.beam_step, self.circles, self.boxes, self.segments, circles,
+                    boxes, self.spec.range_max, ranges)
+            if self._scan_among is None:  # a scan among movers comes every step: skip the dispatcher's type match
+                self._scan_among = compiled_for(cast_scan_among, *args)
+            self._scan_among(*args)
         return self.finish(ranges)
 
     def finish(self, ranges: np.ndarray) -> np.ndarray:

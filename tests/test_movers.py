@@ -121,6 +121,26 @@ def test_in_stop_mode_a_mover_halts_on_touching_a_wall_and_otherwise_passes_thro
     assert end("unobstructed_obstacles") == pytest.approx(7.0, abs=0.1)  # an obstacle's role passes on
 
 
+def test_in_stop_mode_movers_that_meet_halt_and_otherwise_pass_through_each_other():
+    def ends(mode: str) -> np.ndarray:
+        world = world_of(person(3.0, 5.0, [(7.0, 5.0)]), person(7.0, 5.0, [(3.0, 5.0)]), mode=mode)
+        world.reset()
+        for _ in range(60):
+            rows = world.step(0.0, 0.0).movers.rows
+        return rows[:, 0]
+
+    np.testing.assert_allclose(ends("stop"), [5.0 - 0.25, 5.0 + 0.25], atol=0.1)  # face to face, halted
+    np.testing.assert_allclose(ends("unobstructed"), [7.0, 3.0], atol=0.1)
+    # A forklift's side brushing a person standing beside its path: its long box touches, not its centre.
+    forklift = BoxObstacle(x=2.0, y=5.0, length=2.0, width=0.5,
+                           motion=Motion(behavior=Dash(), goals=[(7.0, 5.0)], vel_max=(1.0, 1.0)))
+    world = world_of(forklift, person(5.0, 5.45, [(5.0, 5.45)], speed=0.0))
+    world.reset()
+    for _ in range(50):
+        rows = world.step(0.0, 0.0).movers.rows
+    assert 5.0 - 1.0 - 0.25 <= rows[0, 0] <= 5.0 - 1.0  # its front halts as it reaches the person
+
+
 def test_unobstructed_obstacles_halts_movers_whose_role_is_robot():
     wall = SegmentObstacle(points=[(5.0, 3.0), (5.0, 7.0)])
     world = world_of(wall, person(3.0, 5.0, [(7.0, 5.0)], role="robot"), mode="unobstructed_obstacles")

@@ -117,6 +117,27 @@ def test_a_kernel_compiled_against_a_callees_old_source_is_not_loaded_from_the_c
     assert run() == ["2", "0"]  # the callee changed: recompiled, not loaded
 
 
+def test_a_kernels_machine_code_for_fixed_types_is_the_cached_kernel(tmp_path):
+    # compiled_for skips the dispatcher's type matching: it must be the same kernel (same value,
+    # from the same stamped cache), not a second compilation.
+    (tmp_path / "scaled.py").write_text(
+        "from pathlib import Path\nfrom common.kernel_cache import cached_kernels\n\n"
+        "kernel = cached_kernels(Path(__file__).parent, ('scaled.py',))\n\n\n"
+        "@kernel\ndef total(values, scale):\n    return values.sum() * scale\n")
+    program = ("import numpy as np, scaled\nfrom common.kernel_cache import compiled_for\n"
+               "values = np.arange(4.0)\nrun = compiled_for(scaled.total, values, 2.0)\n"
+               "machine = [o.entry_point for o in scaled.total.overloads.values()]\n"
+               "print(run(values, 3.0), scaled.total(values, 3.0), machine == [run], scaled.total.stats.cache_hits.total())")
+
+    def run() -> list[str]:
+        done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, cwd=tmp_path, check=True,
+                              env={**os.environ, "PYTHONPATH": f"{tmp_path}{os.pathsep}{ROOT}"})
+        return done.stdout.split()
+
+    assert run() == ["18.0", "18.0", "True", "0"]  # the kernel's one compilation, made by compiled_for
+    assert run() == ["18.0", "18.0", "True", "1"]  # loaded from the kernel's cache
+
+
 def test_importing_the_packages_writes_nothing(tmp_path):
     import shutil
 
