@@ -16,7 +16,7 @@ SHIPPED = sorted(POLICIES.glob("*.zip"))
 def test_the_readme_policies_are_shipped():
     assert {p.name for p in SHIPPED} >= {"stage1_2d_ppo.zip", "stage1_2d_sac.zip", "stage1_2d_td3.zip",
                                          "curriculum_2d_ppo.zip", "curriculum_2d_sac.zip", "cluttered_2d_sac.zip",
-                                         "transfer_3d_ppo.zip"}
+                                         "transfer_3d_ppo.zip", "moving_2d_sac.zip", "transfer_moving_3d_ppo.zip"}
 
 
 @pytest.mark.parametrize("path", SHIPPED, ids=[p.stem for p in SHIPPED])
@@ -28,8 +28,9 @@ def test_a_shipped_policy_opens_as_data_and_names_its_training(path):
     load_policy(path)
 
 
-def test_the_transfer_policy_carries_its_evidence():
-    manifest = read_manifest(POLICIES / "transfer_3d_ppo.zip")
+@pytest.mark.parametrize("name", ["transfer_3d_ppo", "transfer_moving_3d_ppo"])
+def test_a_transfer_policy_carries_its_evidence(name):
+    manifest = read_manifest(POLICIES / f"{name}.zip")
     assert manifest["tier"] == "physics3d" and manifest["robot"]["v_max"] == 0.5
     evidence = manifest["transfer"]
     assert evidence["seeds"] >= 3
