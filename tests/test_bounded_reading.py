@@ -182,9 +182,11 @@ def test_a_yaml_file_of_a_million_values_is_refused_fast_for_what_it_holds(unit,
     path.write_text(head + unit * ((2 * 2**20 - len(head) - len(tail)) // len(unit)) + tail)
     assert path.stat().st_size <= 2 * 2**20
     stats, _ = _in_process(_YAML, path, timeout=60)
-    # Composed whole before the count, these took 11 to 20 s and 400 to 800 MB, and the error blamed aliases.
+    # Composed whole before the count, these took 11 to 20 s and 400 to 800 MB, and the error blamed
+    # aliases. Memory tells the two apart on any machine; the time bound is loose because a loaded
+    # machine took 2.4 s for what an idle one does in under 1.
     assert stats["error"].startswith(f"{path}: line ") and stats["error"].endswith(": holds more than 200,000 values; refused")
-    assert stats["seconds"] < 2 and stats["grew_mb"] < 200, stats
+    assert stats["seconds"] < 8 and stats["grew_mb"] < 200, stats
     assert main(["validate", str(path)]) == 2
     _one_line(capsys.readouterr().err, "holds more than 200,000 values; refused")
 
