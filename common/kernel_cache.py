@@ -96,7 +96,7 @@ kernel = cached_kernels(ROOT, KERNEL_MODULES)
 def compiled_for(dispatcher: Dispatcher, *args) -> Callable:
     """The machine code of ``dispatcher`` (a kernel) for arguments of the types of ``args``,
     compiled or loaded from its cache now. Calling it skips the dispatcher's matching of every
-    argument's type to a compiled signature, which for a kernel of thirty-odd arguments costs
-    about as much as a crowd's whole social-force plan; so it may only be called with arguments
-    of exactly those types (arrays of the same dtype, layout and rank)."""
+    argument's type to a compiled signature (for the movers' step, 35 arguments, about 5 µs of a
+    24 µs call); so it may only be called with arrays of exactly those dtypes, layouts and ranks
+    (numbers are converted as the dispatcher would)."""
     return dispatcher.compile(tuple(dispatcher.typeof_pyval(arg) for arg in args))

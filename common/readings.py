@@ -12,6 +12,7 @@ from common.kinematics import Pose2D
 
 if TYPE_CHECKING:
     from common.motion.movers import MoverStates
+    from common.scenario import LidarSpec
 
 
 class Odometry(NamedTuple):
@@ -80,6 +81,19 @@ class Readings(NamedTuple):
     camera: dict[str, np.ndarray] | None = None
     movers: "MoverStates | None" = None
     contact: Contact | None = None
+
+
+def sensed_ranges(ranges: np.ndarray, spec: LidarSpec, rng: np.random.Generator) -> np.ndarray:
+    """What a lidar of ``spec`` makes of exact ranges (at most ``range_max``, a miss reading
+    ``range_max``), in place, alike in every tier: Gaussian noise on the returns only (a beam that
+    hit nothing keeps reading range_max, as IR-SIM's does), then the range limits."""
+    if spec.noise_std > 0.0:
+        returns = ranges < spec.range_max
+        ranges[returns] += rng.normal(0.0, spec.noise_std, int(returns.sum()))
+        np.minimum(ranges, spec.range_max, out=ranges)
+    if spec.noise_std > 0.0 or spec.range_min > 0.0:
+        np.maximum(ranges, spec.range_min, out=ranges)  # a floor, or noise that may dip below 0
+    return ranges
 
 
 def frozen(array: np.ndarray) -> np.ndarray:

@@ -9,12 +9,12 @@ pymunk segment queries) would cost more than the rest of an env step.
 from __future__ import annotations
 
 import math
-from typing import Callable
 
 import numpy as np
 
 from common.geometry import sensor_origin, slab
-from common.kernel_cache import compiled_for, kernel
+from common.kernel_cache import kernel
+from common.readings import sensed_ranges
 from common.scenario import LidarSpec
 
 _EPS = 1e-9  # a hit nearer than this is the sensor's own surface, not an obstacle
@@ -158,7 +158,6 @@ class Lidar:
         angles = spec.beam_angles()
         self.first_beam = float(angles[0]) + spec.offset[2]  # in the robot frame, mounting yaw included
         self.beam_step = float(angles[1] - angles[0]) if spec.beams > 1 else 0.0
-        self._scan_among: Callable | None = None  # cast_scan_among's machine code, once a scan needs it
 
     def place(self, circles: np.ndarray, boxes: np.ndarray, segments: np.ndarray) -> None:
         """Scan these primitives from now on (arrays as the constructor takes them)."""
@@ -181,21 +180,13 @@ class Lidar:
             cast_scan(ox, oy, yaw + self.first_beam, self.beam_step, self.circles, self.boxes, self.segments,
                       self.spec.range_max, ranges)
         else:
-            # The machine code below takes exactly these types.
-            circles = np.ascontiguousarray(circles, dtype=np.float64).reshape(-1, 3)
-            boxes = np.ascontiguousarray(boxes, dtype=np.float64).reshape(-1, 6)
-            args = (ox, oy, yaw + self.first_beam, self.beam_step, self.circles, self.boxes, self.segments, circles,
-                    boxes, self.spec.range_max, ranges)
-            if self._scan_among is None:  # a scan among movers comes every step: skip the dispatcher's type match
-                self._scan_among = compiled_for(cast_scan_among, *args)
-            self._scan_among(*args)
+            cast_scan_among(ox, oy, yaw + self.first_beam, self.beam_step, self.circles, self.boxes, self.segments,
+                            circles, boxes, self.spec.range_max, ranges)
         return self.finish(ranges)
 
     def finish(self, ranges: np.ndarray) -> np.ndarray:
-        """What the sensor makes of exact ranges (``cast_scan``'s): noise, then its range limits; in place."""
-        spec = self.spec
-        if not self._limited:
-            return ranges
+        """What the sensor makes of exact ranges (``cast_scan``'s): :func:`~common.readings.sensed_ranges`."""
+        return sensed_ranges(ranges, self.spec, self.rng) if self._limited else ranges
         if spec.noise_std > 0.0:
             # Only returns carry noise; a beam that hit nothing keeps reading range_max (IR-SIM does the same).
             hits = ranges < spec.range_max

@@ -11,7 +11,8 @@ from typing import Sequence
 import numpy as np
 import pybullet as p
 
-from common.readings import Imu as ImuReading
+from common.geometry import sensor_origin
+from common.readings import Imu as ImuReading, sensed_ranges
 from common.scenario import LidarSpec
 
 GRAVITY = 9.81
@@ -48,9 +49,8 @@ class Lidar:
     def rays(self, x: float, y: float, z: float, yaw: float) -> tuple[np.ndarray, np.ndarray]:
         """Start and end points (N, 3) of the beams for a robot base frame at (x, y, z, yaw), in
         buffers the next call overwrites."""
-        mx, my, _ = self.spec.offset
+        origin = (*sensor_origin(x, y, yaw, self.spec.offset[0], self.spec.offset[1]), z + self.height)
         c, s = math.cos(yaw), math.sin(yaw)
-        origin = (x + c * mx - s * my, y + s * mx + c * my, z + self.height)
         self._from[:] = origin
         np.matmul(self._reach, ((c, s, 0.0), (-s, c, 0.0), (0.0, 0.0, 1.0)), out=self._to)
         self._to += origin
@@ -59,15 +59,9 @@ class Lidar:
     def scan(self, x: float, y: float, z: float, yaw: float) -> np.ndarray:
         """Ranges in beam order (a new array each call), clipped to [range_min, range_max]."""
         hits = p.rayTestBatch(*self.rays(x, y, z, yaw), collisionFilterMask=self._mask, physicsClientId=self.client)
-        spec = self.spec
-        ranges = np.fromiter(map(_HIT_FRACTION, hits), float, spec.beams)
-        ranges *= spec.range_max
-        if spec.noise_std > 0.0:
-            # Only returns carry noise; a beam that hit nothing keeps reading range_max, as in flatland.
-            returns = ranges < spec.range_max
-            ranges[returns] += self.rng.normal(0.0, spec.noise_std, int(returns.sum()))
-        np.maximum(ranges, spec.range_min, out=ranges)
-        return np.minimum(ranges, spec.range_max, out=ranges)
+        ranges = np.fromiter(map(_HIT_FRACTION, hits), float, self.spec.beams)
+        ranges *= self.spec.range_max  # a hit's fraction is at most 1: a miss reads range_max
+        return sensed_ranges(ranges, self.spec, self.rng)
 
 
 class Camera:

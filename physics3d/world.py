@@ -176,7 +176,7 @@ class World:
             # held the GUI at a third of real time on a software renderer.
             p.configureDebugVisualizer(p.COV_ENABLE_RENDERING, 0, physicsClientId=self.client)
         near, first = self._bodies_near(max(abs(v), self._planar_speed), max(abs(w), abs(self.readings.velocity[1])))
-        movers = set() if self.movers is None else set(self.movers.row_of)
+        movers = {} if self.movers is None else self.movers.row_of  # their bodies, as keys
         walls = [body for body in near if body not in movers]
         for substep in range(self.substeps):
             p.stepSimulation(physicsClientId=self.client)
@@ -184,7 +184,7 @@ class World:
                 continue
             if not touched:
                 touched = self.touching(near)
-            elif walls and not set(touched) - movers:
+            elif walls and not set(touched) - movers.keys():
                 # Static geometry touched later in the period still comes first, as in flatland.
                 touched = self.touching(walls) + touched
         state = self.robot.link_pose(), self.robot.velocity()

@@ -89,7 +89,8 @@ class Movers:
                              self._states, self._circle_rows, self._box_rows, t.orca_velocity, self._members,
                              self._inside)
         # Its machine code for exactly these arguments: matching them to a signature anew every
-        # call took a fifth of the call. The pose and command are always floats, ``stopped`` a bool.
+        # call took a fifth of the call. The pose and command go in as floats and ``stopped`` as a
+        # bool whatever their Python type (numba's unboxing converts numbers).
         self._finish_step = compiled_for(finish_step, *self._before_robot, 0.0, 0.0, 0.0, 0.0, 0.0, False,
                                          *self._after_robot)
 
@@ -146,8 +147,8 @@ class Movers:
         if self._python:
             self._advance_in_python(pose, v, w, stopped)
         x, y, yaw = pose
-        touched, self._wanderer_arrived = self._finish_step(*self._before_robot, float(x), float(y), float(yaw),
-                                                            float(v), float(w), bool(stopped), *self._after_robot)
+        touched, self._wanderer_arrived = self._finish_step(*self._before_robot, x, y, yaw, v, w, stopped,
+                                                            *self._after_robot)
         return -1 if touched < 0 else int(np.searchsorted(self._moving, touched))
 
     def _advance_in_python(self, pose: tuple[float, float, float], v: float, w: float, stopped: bool) -> None:
