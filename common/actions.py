@@ -1,5 +1,11 @@
 """The policy's action space: [-1, 1]² mapped to forward-only (v, w) within a robot's limits.
 
+A robot of other kinematics (:mod:`common.drive`) gets one action per command channel, each in
+[-1, 1]: a car (``acker``) maps a[0] to v as below and a[1] to the steering angle (or rate) in
+[-steer_max, steer_max]; an omnidirectional robot maps every channel symmetrically, forward to
+[-v_max, v_max], lateral to [-lateral_max, lateral_max] and w to [-w_max, w_max]: one that
+cannot turn (``omni``) must be able to back towards a goal behind it.
+
 Forward-only is deliberate: both tutorials found that a robot allowed to reverse learns to back
 away from obstacles instead of going round them.
 
@@ -18,11 +24,18 @@ import numbers
 import numpy as np
 from gymnasium import spaces
 
+from common.drive import CHANNELS
 from common.errors import ConfigError, quote
 from common.scenario import RobotProfile
 
 ACTION_SPACE = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
 MAPPINGS = ("linear", "rectified")
+
+
+def action_space(robot: RobotProfile) -> spaces.Box:
+    """The action space of a robot: one number in [-1, 1] per command channel."""
+    size = len(CHANNELS[robot.kinematics])
+    return ACTION_SPACE if size == 2 else spaces.Box(-1.0, 1.0, shape=(size,), dtype=np.float32)
 
 
 def _is_number(value) -> bool:
@@ -33,8 +46,8 @@ def _is_number(value) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
 
 
-def _components(action) -> tuple[float, float]:
-    """The two numbers of an action, refusing a wrong shape, anything but numbers (a string such as
+def _components(action, size: int = 2) -> tuple[float, ...]:
+    """The ``size`` numbers of an action, refusing a wrong shape, anything but numbers (a string such as
     "05" would otherwise read as two digits) or a non-finite value: a NaN let through would
     silently corrupt the robot's pose and every observation after it."""
     array = isinstance(action, np.ndarray)
@@ -42,35 +55,45 @@ def _components(action) -> tuple[float, float]:
         shape = action.shape if array else None if isinstance(action, (str, bytes)) else np.shape(action)
     except ValueError:  # numpy refuses a ragged sequence such as [1, [2, 3]]
         shape = None
-    if shape != (2,):
-        raise ValueError(f"action {quote(action)}: expected shape (2,) with values in [-1, 1], got "
+    if shape != (size,):
+        raise ValueError(f"action {quote(action)}: expected shape ({size},) with values in [-1, 1], got "
                          f"{'a ' + type(action).__name__ if shape is None else f'shape {shape}'}")
-    first, second = action.tolist() if array else action  # tolist: the fast path for arrays
+    values = action.tolist() if array else action  # tolist: the fast path for arrays
     # An array of floats or integers holds numbers; any other dtype, or a sequence, is checked value by value.
-    if not (array and action.dtype.kind in "fiu") and not (_is_number(first) and _is_number(second)):
-        raise ValueError(f"action {quote(action)}: expected two numbers in [-1, 1]")
+    if not (array and action.dtype.kind in "fiu") and not all(_is_number(value) for value in values):
+        raise ValueError(f"action {quote(action)}: expected {('two', 'three')[size - 2]} numbers in [-1, 1]")
     try:
-        a0, a1 = float(first), float(second)
+        values_ = tuple(float(value) for value in values)
     except OverflowError:  # an integer beyond any float
-        a0 = a1 = math.inf
-    if not (math.isfinite(a0) and math.isfinite(a1)):
+        values_ = (math.inf,) * size
+    if not all(math.isfinite(value) for value in values_):
         raise ValueError(f"action {quote(action)}: expected finite numbers in [-1, 1] (NaN and inf are refused)")
-    return a0, a1
+    return values_
 
 
 class ActionMapping:
-    """a[0] in [-1, 1] -> v in [0, v_max] (``linear`` or ``rectified``); a[1] in [-1, 1] -> w in [-w_max, w_max]."""
+    """a[0] in [-1, 1] -> v in [0, v_max] (``linear`` or ``rectified``); a[1] in [-1, 1] -> w in
+    [-w_max, w_max]; other kinematics as the module says."""
 
     def __init__(self, robot: RobotProfile, kind: str = "linear") -> None:
         if kind not in MAPPINGS:
             raise ConfigError(None, "action_mapping", f"unknown mapping {quote(kind)}; allowed: {', '.join(MAPPINGS)}")
         self.kind = kind
+        self.kinematics = robot.kinematics
+        self.space = action_space(robot)
         self.v_max = robot.v_max
         self.w_max = robot.w_max
         self._rectified = kind == "rectified"
+        # The symmetric scale of every channel after the first, and of the first for omni robots.
+        scales = {"v": robot.v_max, "w": robot.w_max, "lateral": robot.lateral_max, "steer": robot.steer_max}
+        self._scales = tuple(scales[name] for name in CHANNELS[robot.kinematics])
+        self._omni = robot.kinematics in ("omni", "omni_angular")
 
-    def to_velocity(self, action) -> tuple[float, float]:
-        """Velocities for an action: finite values are clipped into [-1, 1]; anything else is a ValueError."""
+    def to_velocity(self, action) -> tuple[float, ...]:
+        """The command for an action, (v, w) for a differential drive: finite values are clipped
+        into [-1, 1]; anything else is a ValueError."""
+        if self.kinematics != "diff":
+            return self._command(action)
         a0, a1 = _components(action)
         # Comparisons, not min(max()): the builtin calls made the whole mapping twice as slow.
         a0 = -1.0 if a0 < -1.0 else 1.0 if a0 > 1.0 else a0
@@ -78,7 +101,19 @@ class ActionMapping:
         v = max(a0, 0.0) * self.v_max if self._rectified else 0.5 * (a0 + 1.0) * self.v_max
         return v, a1 * self.w_max
 
-    def to_action(self, v: float, w: float) -> np.ndarray:
-        """An action that commands (v, w), clipped to what the mapping can express."""
-        a0 = v / self.v_max if self._rectified else 2.0 * v / self.v_max - 1.0
-        return np.clip(np.array([a0, w / self.w_max], dtype=np.float32), -1.0, 1.0)
+    def _command(self, action) -> tuple[float, ...]:
+        clipped = [min(max(a, -1.0), 1.0) for a in _components(action, len(self._scales))]
+        command = [a * scale for a, scale in zip(clipped, self._scales)]
+        if not self._omni:  # a car drives forward only, as a differential drive does
+            a0 = clipped[0]
+            command[0] = max(a0, 0.0) * self.v_max if self._rectified else 0.5 * (a0 + 1.0) * self.v_max
+        return tuple(command)
+
+    def to_action(self, *command: float) -> np.ndarray:
+        """An action that commands ``command`` ((v, w) for a differential drive), clipped to what
+        the mapping can express."""
+        action = [value / scale for value, scale in zip(command, self._scales)]
+        if not self._omni:
+            v = command[0]
+            action[0] = v / self.v_max if self._rectified else 2.0 * v / self.v_max - 1.0
+        return np.clip(np.array(action, dtype=np.float32), -1.0, 1.0)

@@ -6,8 +6,9 @@ objects, so that ``flatland`` reproduces IR-SIM's poses, scans and movers. Facts
 
 Mapping, and where it deliberately differs from IR-SIM:
 
-* The first robot (after expanding ``number``) is the controlled one and must use
-  ``kinematics: {name: diff}``. Further robots, and every obstacle, are obstacles at their initial
+* The first robot (after expanding ``number``) is the controlled one, driven by IR-SIM's
+  ``diff``, ``omni``, ``omni_angular`` or ``acker`` kinematics (:mod:`common.drive`; a car's
+  ``wheelbase`` puts its footprint ahead of its rear axle, as in IR-SIM). Further robots, and every obstacle, are obstacles at their initial
   state; those IR-SIM moves (kinematics ``diff`` or ``omni`` and a ``behavior`` or a group's
   ``group_behavior``) carry a :class:`~common.motion.spec.Motion` read by
   :mod:`common.irsim_motion`, and move as IR-SIM moves them. The collision modes ``stop``,
@@ -40,6 +41,7 @@ from typing import Any, Callable, Hashable, NamedTuple
 import numpy as np
 from pydantic import ValidationError
 
+from common.drive import CHANNELS as DRIVE_CHANNELS
 from common.errors import ConfigError, quote
 from common.irsim_values import (
     Entry,
@@ -527,47 +529,69 @@ def _kinematics_name(entry: Entry, path: str) -> str | None:
     return string(string(kinematics["name"], name_path).lower(), name_path, KINEMATICS_NAMES)
 
 
-def _check_diff_drive(entry: Entry, path: str) -> None:
-    """The controlled robot must be an IR-SIM diff drive that can move and has no motion noise."""
+def _check_drive(entry: Entry, path: str) -> None:
+    """The controlled robot must be driven by one of IR-SIM's kinematics, move, and have no motion noise."""
     item = value_of(entry, "kinematics", None, path)
-    allowed = "allowed: {name: diff}"
+    allowed = f"allowed: {{name: {' | '.join(DRIVE_CHANNELS)}}}"
     if item.value is None:
         raise fail(item.path, f"missing (IR-SIM would make the robot static); {allowed}")
     kinematics = mapping_of(item.value, item.path)
     name = kinematics.get("name")
-    if not isinstance(name, str) or name.lower() != "diff":
+    if not isinstance(name, str) or name.lower() not in DRIVE_CHANNELS:
         raise fail(item.path, f"unsupported kinematics {quote(name)} for the controlled robot; {allowed}")
-    check_keys(kinematics, DIFF_KINEMATICS_KEYS, item.path)
+    check_keys(kinematics, KINEMATICS_KEYS if name.lower() == "acker" else DIFF_KINEMATICS_KEYS, item.path)
     if boolean(kinematics.get("noise", False), join(item.path, "noise")):
         raise fail(join(item.path, "noise"), "motion noise is not modelled; allowed: false")
+    if name.lower() == "acker":
+        string(kinematics.get("mode", "steer"), join(item.path, "mode"), ("steer", "angular"))
     if boolean(value_of(entry, "static", False, path).value, join(path, "static")):
         raise fail(join(path, "static"), "a static robot cannot be driven; allowed: false")
-    velocity = value_of(entry, "velocity", [0, 0], path)
-    if any(v != 0 for v in number_list(velocity.value, velocity.path, size=2)):
-        raise fail(velocity.path, "the robot starts at rest; allowed: [0, 0]")
+    size = len(DRIVE_CHANNELS[name.lower()])
+    velocity = value_of(entry, "velocity", [0] * size, path)
+    if any(v != 0 for v in number_list(velocity.value, velocity.path, size=size)):
+        raise fail(velocity.path, f"the robot starts at rest; allowed: {[0] * size}")
+    state = value_of(entry, "state", [0, 0, 0], path)
+    if name.lower() == "acker" and isinstance(state.value, list) and len(state.value) > 3 and state.value[3] != 0:
+        raise fail(state.path, "a car starts with its wheels straight; allowed: a steering angle (state[3]) of 0")
+
+
+# IR-SIM's names of each kinematics' command channels (vel_min, vel_max, acce), as RobotProfile's.
+_CHANNEL_FIELDS = {"v": ("v_min", "v_max", "accel_v"), "w": ("w_min", "w_max", "accel_w"),
+                   "lateral": ("lateral_min", "lateral_max", "accel_lateral"),
+                   "steer": ("steer_min", "steer_max", "accel_steer")}
 
 
 def _robot_profile(entry: Entry, shape: _Shape, path: str) -> RobotProfile:
-    """Footprint, velocity limits and acceleration limits of the controlled robot."""
-    if shape.kind == "circle" and np.any(shape.points != 0):
-        raise fail(join(path, "shape.center"), "an off-centre footprint is not supported; allowed: [0, 0]")
-    if shape.kind == "rectangle" and np.any(shape.points != 0):
-        raise fail(join(path, "shape.wheelbase"), "an off-centre footprint is not supported; allowed: null")
-    vel_min = value_of(entry, "vel_min", [-1, -1], path)
-    vel_max = value_of(entry, "vel_max", [1, 1], path)
-    acce = value_of(entry, "acce", [math.inf, math.inf], path)
-    v_min, w_min = number_list(vel_min.value, vel_min.path, size=2, allow_inf=True)
-    v_max, w_max = number_list(vel_max.value, vel_max.path, size=2, allow_inf=True)
-    accel_v, accel_w = number_list(acce.value, acce.path, size=2, allow_inf=True)
-    for low, high, what in ((v_min, v_max, "linear"), (w_min, w_max, "angular")):
-        if low > high:
-            raise fail(vel_min.path, f"{what} minimum {low:g} exceeds vel_max's {high:g}; allowed: at most vel_max")
+    """Footprint, kinematics, velocity limits and acceleration limits of the controlled robot."""
+    if np.any(shape.points[:, 1] != 0):
+        raise fail(join(path, "shape.center"), "a footprint off the robot's heading line is not supported; "
+                   "allowed: a centre [x, 0]")
+    kinematics = value_of(entry, "kinematics", None, path)
+    name = kinematics.value["name"].lower()
+    channels = DRIVE_CHANNELS[name]
+    size = len(channels)
+    vel_min = value_of(entry, "vel_min", [-1] * size, path)
+    vel_max = value_of(entry, "vel_max", [1] * size, path)
+    acce = value_of(entry, "acce", [math.inf] * size, path)
+    lows = number_list(vel_min.value, vel_min.path, size=size, allow_inf=True)
+    highs = number_list(vel_max.value, vel_max.path, size=size, allow_inf=True)
+    accelerations = number_list(acce.value, acce.path, size=size, allow_inf=True)
     shape_path = value_of(entry, "shape", None, path).path
-    fields = {
-        "v_min": Value(v_min, vel_min.path), "w_min": Value(w_min, vel_min.path),
-        "v_max": Value(v_max, vel_max.path), "w_max": Value(w_max, vel_max.path),
-        "accel_v": Value(accel_v, acce.path), "accel_w": Value(accel_w, acce.path),
-    }
+    fields = {"kinematics": Value(name, join(kinematics.path, "name")),
+              "footprint_offset": Value(float(shape.points[0, 0]), shape_path)}
+    for channel, low, high, acceleration in zip(channels, lows, highs, accelerations):
+        if low > high:
+            raise fail(vel_min.path, f"{channel} minimum {low:g} exceeds vel_max's {high:g}; allowed: at most vel_max")
+        low_field, high_field, acceleration_field = _CHANNEL_FIELDS[channel]
+        fields.update({low_field: Value(low, vel_min.path), high_field: Value(high, vel_max.path),
+                       acceleration_field: Value(acceleration, acce.path)})
+    if name == "acker":
+        # The wheelbase under kinematics wins over the shape's, as in IR-SIM (default 1).
+        settings, outline = kinematics.value, value_of(entry, "shape", None, path).value or {}
+        wheelbase = settings.get("wheelbase", outline.get("wheelbase") if isinstance(outline, dict) else None)
+        fields["axle_distance"] = Value(1.0 if wheelbase is None else real(wheelbase, join(kinematics.path, "wheelbase"),
+                                                                            0, strict=True), kinematics.path)
+        fields["steer_mode"] = Value(settings.get("mode", "steer"), join(kinematics.path, "mode"))
     if shape.kind == "circle":
         fields.update(shape=Value("circle", shape_path), radius=Value(shape.radius, shape_path))
     else:
@@ -632,8 +656,8 @@ def _object(entry: Entry, path: str, draws: _Draws, role: str) -> Any:
         raise fail(item.path, pydantic_error(None, exc).problem) from None
 
 
-_DIFF_DRIVE_KEYS = ("kinematics", "static", "velocity")
-_PROFILE_KEYS = ("vel_min", "vel_max", "acce")  # and the footprint read, which is keyed on its shape
+_DRIVE_KEYS = ("kinematics", "static", "velocity", "state")
+_PROFILE_KEYS = ("kinematics", "vel_min", "vel_max", "acce")  # and the footprint read, which is keyed on its shape
 
 
 def _parse(data: dict, source: str | Path | None, draws: _Draws) -> Scenario:
@@ -652,7 +676,7 @@ def _parse(data: dict, source: str | Path | None, draws: _Draws) -> Scenario:
         for entry in _expand(group, path, draws, world):
             # Objects are made in IR-SIM's order, so random radii and wandering goals draw as IR-SIM's do.
             if robot is None:
-                reads.once("diff drive", values_of(entry, _DIFF_DRIVE_KEYS), lambda: _check_diff_drive(entry, path))
+                reads.once("drive", values_of(entry, _DRIVE_KEYS), lambda: _check_drive(entry, path))
                 shape = _shape(value_of(entry, "shape", None, path), draws, ROBOT_SHAPES)
                 robot = (entry, path, shape)
                 if needs_tracking(entry, path):
@@ -660,7 +684,8 @@ def _parse(data: dict, source: str | Path | None, draws: _Draws) -> Scenario:
             else:
                 obstacles.append(_object(entry, path, draws, "robot"))
     if robot is None:
-        raise fail(f"{prefix}robot", "no robot defined; allowed: at least one robot with kinematics {name: diff}")
+        raise fail(f"{prefix}robot", "no robot defined; allowed: at least one robot with kinematics "
+                   f"{{name: {' | '.join(DRIVE_CHANNELS)}}}")
     for group, path in _groups(data.get("obstacle"), f"{prefix}obstacle"):
         for entry in _expand(group, path, draws, world):
             obstacles.append(_object(entry, path, draws, "obstacle"))

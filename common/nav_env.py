@@ -11,7 +11,7 @@ from typing import Any, Mapping, Sequence
 import gymnasium as gym
 import numpy as np
 
-from common.actions import ACTION_SPACE, ActionMapping
+from common.actions import ActionMapping
 from common.kinematics import wrap_angle
 from common.observations import DEFAULT_GOAL_DISTANCE_SCALE, ObservationLayout, make_layout
 from common.readings import Readings, nearest_return
@@ -59,10 +59,10 @@ class NavigationEnv(gym.Env):
         self.action_mapping = action_mapping
         self.goal_distance_scale = goal_distance_scale
         self.reward = Reward(reward)
-        self.action_space = ACTION_SPACE
         self.world: WorldLike | None = None
         self._drawn: Scenario | None = None
         self._load(self.source.draw(np.random.default_rng(0)))
+        self.action_space = self.actions.space  # one number per command channel of the robot's kinematics
         self.observation_space = self.layout.space
         self._readings: Readings | None = None
         self._pending_rng: dict | None = None
@@ -89,6 +89,10 @@ class NavigationEnv(gym.Env):
         self.world = self._build_world(drawn)
         self.scenario = scenario = self.world.scenario
         if previous is None or scenario.robot != previous.robot or scenario.lidar != previous.lidar:
+            if previous is not None and scenario.robot.kinematics != previous.robot.kinematics:
+                raise ValueError(f"scenario {scenario.name!r}: a {scenario.robot.kinematics} robot after a "
+                                 f"{previous.robot.kinematics} one; an env's action space is fixed, so its "
+                                 "scenarios must share the robot's kinematics")
             self.layout = self._make_layout(scenario)
             self.actions = ActionMapping(scenario.robot, self.action_mapping)
         self._goal = scenario.goal
@@ -118,8 +122,11 @@ class NavigationEnv(gym.Env):
     def step(self, action) -> tuple[np.ndarray, float, bool, bool, dict]:
         if self._closed:
             raise gym.error.ClosedEnvironmentError("step() on a closed env; make a new one")
-        v, w = self.actions.to_velocity(action)
-        readings = self._readings = self.world.step(v, w)
+        command = self.actions.to_velocity(action)
+        readings = self._readings = self.world.step(*command)
+        # The reward's speed and turn: the command's for a differential drive, else its forward
+        # speed and the turn the robot made.
+        v, w = command if len(command) == 2 and self.actions.kinematics == "diff" else (command[0], readings.velocity[1])
         task, previous = self.task, self.task.distance
         outcome = task.step(readings)
         reached = outcome == "success"

@@ -165,35 +165,73 @@ Obstacle = Annotated[
 ]
 
 
-class RobotProfile(Frozen):
-    """The robot's footprint, wheels and velocity limits.
+PositiveSpeed = Annotated[float, Field(gt=0.0, le=MAX_SPEED)]
+KINEMATICS = ("diff", "omni", "omni_angular", "acker")
 
-    The policy's actions map to v in [0, v_max] and w in [-w_max, w_max]; ``v_min`` (negative to allow
-    reversing), ``w_min`` and the acceleration limits (m/s², rad/s²) only constrain raw
-    ``World.step`` commands, as IR-SIM's ``vel_min`` and ``acce`` do.
+
+class RobotProfile(Frozen):
+    """The robot's footprint, drive and velocity limits.
+
+    ``kinematics`` is how a command moves the robot, as IR-SIM's models do (:mod:`common.drive`):
+    ``diff`` (v, w), ``omni`` (forward, lateral speed in the body frame; the heading stays),
+    ``omni_angular`` (forward, lateral, w) and ``acker`` (v and the steering angle, or its rate
+    with ``steer_mode: angular``; wheels ``axle_distance`` apart). Each channel has its limits:
+    ``v_*`` forward, ``w_*`` turn rate, ``lateral_*`` sideways, ``steer_*`` steering; a ``*_min``
+    left out is minus the ``*_max``, except ``v_min`` (0: forward only). The policy's actions map to
+    v in [0, v_max] and w in [-w_max, w_max] (other kinematics: :mod:`common.actions`); the minima
+    and the acceleration limits (m/s², rad/s²) constrain raw ``World.step`` commands, as IR-SIM's
+    ``vel_min`` and ``acce`` do. ``footprint_offset``: how far ahead of the robot's reference point
+    (its pose, a car's rear axle) the footprint's centre sits.
     """
 
     shape: Literal["circle", "box"] = "circle"
     radius: Length = 0.2
     length: Length = 0.3
     width: Length = 0.2
+    footprint_offset: Annotated[float, Field(ge=-MAX_LENGTH, le=MAX_LENGTH)] = 0.0
+    kinematics: Literal["diff", "omni", "omni_angular", "acker"] = "diff"
     wheel_radius: Length = 0.05
     wheel_base: Length = 0.22
     v_min: Speed = 0.0
-    v_max: Annotated[float, Field(gt=0.0, le=MAX_SPEED)] = 1.0
-    w_max: Annotated[float, Field(gt=0.0, le=MAX_SPEED)] = 1.0
+    v_max: PositiveSpeed = 1.0
+    w_max: PositiveSpeed = 1.0
     w_min: Speed | None = None  # default -w_max
+    lateral_max: PositiveSpeed = 1.0
+    lateral_min: Speed | None = None  # default -lateral_max
+    steer_max: PositiveSpeed = 1.0
+    steer_min: Speed | None = None  # default -steer_max
+    steer_mode: Literal["steer", "angular"] = "steer"
+    axle_distance: Length = 1.0
     accel_v: Acceleration = math.inf
     accel_w: Acceleration = math.inf
+    accel_lateral: Acceleration = math.inf
+    accel_steer: Acceleration = math.inf
     encoder_noise: Fraction = 0.0
 
     @model_validator(mode="after")
     def _limits_ordered(self) -> "RobotProfile":
         if self.v_min > self.v_max:
             raise ValueError(f"v_min {self.v_min} must not exceed v_max {self.v_max}")
-        if self.w_min is not None and self.w_min > self.w_max:
-            raise ValueError(f"w_min {self.w_min} must not exceed w_max {self.w_max}")
+        for name in ("w", "lateral", "steer"):
+            low, high = getattr(self, f"{name}_min"), getattr(self, f"{name}_max")
+            if low is not None and low > high:
+                raise ValueError(f"{name}_min {low} must not exceed {name}_max {high}")
+        if self.kinematics == "acker" and self.steer_mode == "steer" and max(self.steer_max, -self.steer_low) >= 1.5:
+            raise ValueError(f"a steering angle limit of {max(self.steer_max, -self.steer_low):g} rad turns the "
+                             "car on the spot; allowed: below 1.5 rad")
+        if self.kinematics != "diff" and self.encoder_noise > 0:
+            raise ValueError(f"encoder_noise models a differential drive's wheels; allowed: 0 for {self.kinematics}")
         return self
+
+    @property
+    def lateral_low(self) -> float:
+        """The lowest sideways velocity a raw command may reach (omni kinematics)."""
+        return -self.lateral_max if self.lateral_min is None else self.lateral_min
+
+    @property
+    def steer_low(self) -> float:
+        """The lowest steering angle (or rate) a raw command may reach (acker)."""
+        return -self.steer_max if self.steer_min is None else self.steer_min
 
     @property
     def w_low(self) -> float:
@@ -202,8 +240,10 @@ class RobotProfile(Frozen):
 
     @property
     def bounding_radius(self) -> float:
-        """Radius of the smallest circle around the footprint (the conservative clearance)."""
-        return self.radius if self.shape == "circle" else 0.5 * math.hypot(self.length, self.width)
+        """Radius of the smallest circle about the reference point around the footprint (the
+        conservative clearance)."""
+        half = self.radius if self.shape == "circle" else 0.5 * math.hypot(self.length, self.width)
+        return half + abs(self.footprint_offset)
 
 
 class LidarSpec(Frozen):

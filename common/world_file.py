@@ -12,7 +12,7 @@ from common.scenario import Scenario, scenario_from_mapping
 from common.yaml_io import read_yaml_mapping
 
 _IRSIM_ONLY_KEYS = {"obstacle", "gui", "custom", "irsim"}
-_IRSIM_ROBOT_KEYS = {"kinematics", "state", "sensors", "vel_max", "vel_min", "distribution", "number"}
+_IRSIM_ROBOT_KEYS = {"state", "sensors", "vel_max", "vel_min", "distribution", "number"}
 # Keys of IR-SIM's world section that a project scenario's world lacks (IR-SIM's empty world has no robot).
 _IRSIM_WORLD_KEYS = {"name", "sample_time", "step_mode", "control_mode", "obstacle_map", "mdownsample", "fog_map",
                      "fog_map_resolution", "gravity", "friction", "restitution", "drive_tau", "plot", "status"}
@@ -28,7 +28,9 @@ def is_irsim(data: dict) -> bool:
     robot = data.get("robot")
     if isinstance(robot, list):
         return True
-    return isinstance(robot, dict) and (bool(_IRSIM_ROBOT_KEYS & robot.keys()) or isinstance(robot.get("shape"), dict))
+    # A scenario's robot names its kinematics and shape; an IR-SIM robot maps them.
+    return isinstance(robot, dict) and (bool(_IRSIM_ROBOT_KEYS & robot.keys()) or isinstance(robot.get("shape"), dict)
+                                        or isinstance(robot.get("kinematics"), dict))
 
 
 class WorldFile:

@@ -21,6 +21,7 @@ import pymunk
 
 from common.actuation import Actuator, WheelDynamics
 from common.conditions import Conditions
+from common.drive import Drive, body_euler
 from common.kinematics import INTEGRATORS, Pose2D, WheelOdometry, wheel_speeds, wrap_angle
 from common.motion.movers import Movers, mover_generator
 from flatland.polygons import convex_pieces
@@ -60,7 +61,9 @@ class World:
 
     ``reset(seed)`` puts the robot at the scenario's start; ``step(v, w)`` applies raw velocities
     (clipped to the robot's limits and acceleration window) for one ``step_time`` and returns a
-    :class:`Readings` snapshot. ``conditions`` (:mod:`common.conditions`; flatland's defaults: an
+    :class:`Readings` snapshot. A robot of other kinematics takes its own command
+    (:mod:`common.drive`: ``step(forward, lateral)`` for ``omni``, and so on); its readings'
+    velocity is (forward speed, turn rate) and its odometry is exact. ``conditions`` (:mod:`common.conditions`; flatland's defaults: an
     ideal robot) may change the robot, its sensors' noise and its actuation; ``world.scenario`` is
     the scenario as conditioned.
 
@@ -95,8 +98,12 @@ class World:
         self._build_robot(scenario)
         self._integrate = INTEGRATORS[scenario.world.integrator]
         self.odometry = WheelOdometry(robot.wheel_radius, robot.wheel_base, robot.encoder_noise, self.rng, self._integrate)
-        # Encoder noise is drawn before the scan's: with it, the whole step stays in Python to keep that order.
-        self._compiled = robot.encoder_noise == 0.0
+        self.drive = None if robot.kinematics == "diff" else Drive(robot, scenario.world.step_time)
+        # Encoder noise is drawn before the scan's: with it, the whole step stays in Python to keep
+        # that order. The compiled step moves a differential drive only.
+        self._compiled = robot.encoder_noise == 0.0 and self.drive is None
+        # A step's path is an arc only under the exact integrator; the other models step by Euler.
+        self._curved = scenario.world.integrator == "exact" and self.drive is None
         self._constants = step_constants(
             step_time=scenario.world.step_time, exact=scenario.world.integrator == "exact",
             sweep_radius=robot.bounding_radius, wheel_radius=robot.wheel_radius, wheel_base=robot.wheel_base,
@@ -218,10 +225,15 @@ class World:
     def _build_robot(self, scenario: Scenario) -> None:
         robot = scenario.robot
         self.body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+        ahead = robot.footprint_offset
         if robot.shape == "circle":
-            self.footprint: pymunk.Shape = pymunk.Circle(self.body, robot.radius)
+            self.footprint: pymunk.Shape = pymunk.Circle(self.body, robot.radius, (ahead, 0.0))
         else:
-            self.footprint = pymunk.Poly.create_box(self.body, (robot.length, robot.width))
+            half_length, half_width = 0.5 * robot.length, 0.5 * robot.width
+            self.footprint = pymunk.Poly(self.body, [(ahead + sx * half_length, sy * half_width)
+                                                     for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+        # A circle about the reference point is swept exactly; anything else pose by pose.
+        self._swept_circle = robot.shape == "circle" and ahead == 0.0
         self._sweep_radius = robot.bounding_radius
         self.footprint.filter = pymunk.ShapeFilter(categories=_ROBOT_CATEGORY)
         self._not_robot = pymunk.ShapeFilter(mask=pymunk.ShapeFilter.ALL_MASKS() ^ _ROBOT_CATEGORY)
@@ -246,6 +258,8 @@ class World:
             self.mover_rng = self.rng if self._one_stream else mover_generator(seed)
         self.pose = self.scenario.start_pose
         self.velocity = (0.0, 0.0)
+        if self.drive is not None:
+            self.drive.reset()
         self.steps = 0
         drawn = self.conditions.draw(self.rng)
         self.actuator.reset(drawn.action_delay, drawn.motor_gain)
@@ -259,13 +273,21 @@ class World:
         self.readings = self._read(0.0, self.lidar.scan(*self.pose, *self.movers.visible()), None)
         return self.readings
 
-    def step(self, v: float, w: float) -> Readings:
-        """Drive with (v m/s, w rad/s) for one step and return the new readings."""
+    def step(self, *command: float) -> Readings:
+        """Drive with ``command`` for one step, (v m/s, w rad/s) for a differential drive (others:
+        :mod:`common.drive`), and return the new readings."""
         ranges = None
         movers = self.movers
+        lateral = 0.0
         if self.stopped:
             v = w = 0.0
+            if self.drive is not None:
+                self.drive.halt()
+        elif self.drive is not None:
+            v, lateral, w = self.drive.move(command)
+            self.pose, self._touching_static = self._move(self.pose, v, w, lateral=lateral)
         else:
+            v, w = command
             v, w = self._clip(float(v), float(w))
             if not self.actuator.idle:
                 v, w = self.actuator(v, w, self._dt)
@@ -275,7 +297,10 @@ class World:
                 self.pose, self._touching_static = self._move(self.pose, v, w, test_clear=not self._compiled)
             else:
                 self._touching_static = False
-        if ranges is None:
+        if self.drive is not None:
+            odometry = self.odometry
+            odometry.pose, odometry.v, odometry.w = self.pose, v, w
+        elif ranges is None:
             left, right = wheel_speeds(v, w, self.odometry.wheel_radius, self.odometry.wheel_base)
             self.odometry.update(left, right, self._dt)
         previous_v = self.velocity[0]
@@ -286,7 +311,7 @@ class World:
             self.stopped = self._touching_static and self._halts
             self.readings = self._read(acceleration, self.lidar.scan(*self.pose) if ranges is None else ranges)
             return self.readings
-        touched = movers.finish(self.pose, v, w, self.stopped, self.mover_rng)
+        touched = movers.finish(self.pose, v, w, self.stopped, self.mover_rng, lateral)
         contact = None
         if self._touching_static:
             contact = Contact("static", -1, "robot")
@@ -322,8 +347,11 @@ class World:
         w = w_lo if w < w_lo else w
         return (v_hi if v > v_hi else v), (w_hi if w > w_hi else w)
 
-    def _move(self, start: Pose2D, v: float, w: float, test_clear: bool = True) -> tuple[Pose2D, bool]:
-        """Where the robot ends a step of (v, w) from ``start``, and whether it collided.
+    def _move(self, start: Pose2D, v: float, w: float, test_clear: bool = True,
+              lateral: float | None = None) -> tuple[Pose2D, bool]:
+        """Where the robot ends a step of (v, w) from ``start``, and whether it collided; with
+        ``lateral``, a step of body velocity (v, lateral) and turn rate w by Euler (other
+        kinematics than diff).
 
         The move is swept along the integrator's path and the earliest contact decides. If the end
         pose still touches what was touched first, the robot halts at the end pose, as IR-SIM's
@@ -333,13 +361,21 @@ class World:
         ``test_clear=False``: the compiled step has already found something near the path. In
         ``unobstructed`` mode nothing halts the robot: it ends at the end pose, touching or not.
         """
-        end = self._integrate(start, v, w, self._dt)
+        if lateral is None:
+            def at(seconds: float) -> Pose2D:
+                return self._integrate(start, v, w, seconds)
+            speed = abs(v)
+        else:
+            def at(seconds: float) -> Pose2D:
+                return body_euler(start, v, lateral, w, seconds)
+            speed = math.hypot(v, lateral)
+        end = at(self._dt)
         if not self._halts:
             return end, self.overlaps(end)
         # Nothing within the swept capsule, nothing touched: decided without pymunk's Python layer,
         # which costs more than the rest of a move.
         lidar = self.lidar
-        capsule = swept_capsule(self._sweep_radius, v, w, self._dt)
+        capsule = swept_capsule(self._sweep_radius, speed, w, self._dt)
         if test_clear and path_clear(start[0], start[1], end[0], end[1], capsule, lidar.circles, lidar.boxes,
                                      lidar.segments, self._solids):
             return end, False
@@ -347,34 +383,34 @@ class World:
         # follows: chipmunk walks its tree with the bare segment and misses shapes that only the
         # radius reaches; the bounding-box query rarely comes back empty now, for a path near a
         # polygon's bounds or within the margin.)
-        reach = abs(v) * self._dt + self._sweep_radius
+        reach = speed * self._dt + self._sweep_radius
         box = pymunk.BB(start[0] - reach, start[1] - reach, start[0] + reach, start[1] + reach)
         candidates = self.space.bb_query(box, self._not_robot)
         if not candidates:
             return end, False
         if self.overlaps(start):
             return end, self.overlaps(end)  # leaving an overlap: judge by the end pose alone, as IR-SIM does
-        first = self._first_contact(start, v, w, end, candidates)
+        first = self._first_contact(start, at, speed, w, end, candidates)
         if first is None:
             return end, False
         pose, touched = first
         return (end if touched & self._touching(end) else pose), True
 
-    def _first_contact(self, start: Pose2D, v: float, w: float, end: Pose2D,
+    def _first_contact(self, start: Pose2D, at: Callable[[float], Pose2D], speed: float, w: float, end: Pose2D,
                        candidates: list[pymunk.Shape]) -> tuple[Pose2D, set[pymunk.Shape]] | None:
-        """The earliest touching pose on the way from ``start`` to ``end``, and what it touches."""
+        """The earliest touching pose on the way from ``start`` to ``end`` (``at(t)``: the pose
+        ``t`` seconds in, at ``speed``, turning at ``w``), and what it touches."""
         turn = abs(w) * self._dt
-        circle = self.scenario.robot.shape == "circle"
+        circle = self._swept_circle
         if circle:
             # The swept circle is the footprint: exact along a straight move, chords along an arc.
-            curved = turn > 0 and self._integrate is not INTEGRATORS["euler"]
-            count = max(1, math.ceil(turn / _ARC_STEP)) if curved else 1
+            count = max(1, math.ceil(turn / _ARC_STEP)) if turn > 0 and self._curved else 1
         else:
-            # A box's corners travel the translation plus their arc about the centre.
-            count = max(1, math.ceil((abs(v) * self._dt + turn * self._sweep_radius) / SWEEP_STEP))
+            # A footprint's farthest point travels the translation plus its arc about the reference point.
+            count = max(1, math.ceil((speed * self._dt + turn * self._sweep_radius) / SWEEP_STEP))
         previous = start
         for k in range(1, count + 1):
-            pose = end if k == count else self._integrate(start, v, w, self._dt * k / count)
+            pose = end if k == count else at(self._dt * k / count)
             if circle:
                 hits = [(hit.alpha, shape) for shape in candidates
                         if (hit := shape.segment_query(previous[:2], pose[:2], self._sweep_radius))]

@@ -16,7 +16,7 @@ import pybullet as p
 
 from common.actuation import Actuator
 from common.conditions import Conditions
-from common.errors import ConfigError
+from common.errors import ConfigError, quote
 from common.kinematics import Pose2D, WheelOdometry, unicycle_exact, wrap_angle
 from common.motion.movers import mover_generator
 from common.readings import Contact, Odometry, Readings, frozen, mover_fault
@@ -53,7 +53,11 @@ def refuse_unmodelled(scenario: Scenario) -> None:
     """A one-line error for what this tier cannot build: IR-SIM's ``unobstructed`` collision mode
     (here the robot collides with what it touches; a world that loaded and then behaved otherwise
     would be wrong without a word). ``unobstructed_obstacles`` is modelled: the robot stops on a
-    contact, as in ``stop``, and the movers pass on as :mod:`common.motion` moves them."""
+    contact, as in ``stop``, and the movers pass on as :mod:`common.motion` moves them. The robot
+    is the URDF's differential drive: a scenario's car or omnidirectional robot is refused."""
+    if scenario.robot.kinematics != "diff":
+        raise ConfigError(None, "robot.kinematics", f"the 3D robot is a differential drive, not "
+                          f"{quote(scenario.robot.kinematics)}; allowed: diff")
     if scenario.world.collision_mode == "unobstructed":
         raise ConfigError(None, "world.collision_mode", "'unobstructed' is not modelled in the 3D tier; "
                           "allowed: stop, unobstructed_obstacles")

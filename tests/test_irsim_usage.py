@@ -2,7 +2,7 @@
 reproduces or refuses with one line; none may load and then diverge.
 
 For each file, robot 0 gets a 360° lidar (so movers show in its scans) and both simulators drive
-it with the same seeded commands for 300 steps (IR-SIM's ``control_mode: keyboard`` read as
+it with the same seeded commands (one per channel of its kinematics) for 300 steps (IR-SIM's ``control_mode: keyboard`` read as
 ``auto``: here the program drives robot 0 and every other robot its behaviour). Reproduced means
 every step alike: robot 0's pose within 1 mm, at least 95 % of the beams within 2 cm (IR-SIM's
 circles are 64-gons), the collision flag, and every mover within 1 mm (1e-6 m where all move by
@@ -92,12 +92,14 @@ def test_every_usage_world_irsim_runs_is_reproduced_or_refused(path, tmp_path):
     dash_only = world.movers is None or all(o.motion.behavior.name == "dash" for o in world.scenario.movers)
     tolerance = 1e-6 if dash_only else 1e-3
     rng = np.random.default_rng(1)
-    commands = list(zip(rng.uniform(-0.2, 1.0, STEPS), rng.uniform(-1.0, 1.0, STEPS)))
+    commands = np.column_stack([rng.uniform(-0.2, 1.0, STEPS), rng.uniform(-1.0, 1.0, STEPS)])
+    if world.drive is not None and len(world.drive.channels) == 3:  # omni_angular: forward, lateral, w
+        commands = np.column_stack([commands, rng.uniform(-1.0, 1.0, STEPS)])
     try:
         world.reset()
-        for k, (v, w) in enumerate(commands):
-            ours = world.step(v, w)
-            env.step([v, w])
+        for k, command in enumerate(commands):
+            ours = world.step(*command)
+            env.step(command.reshape(-1, 1))
             pose = np.asarray(env.get_robot_state()[:3, 0], dtype=float)
             np.testing.assert_allclose(ours.pose[:2], pose[:2], rtol=0, atol=1e-3, err_msg=f"robot 0, step {k}")
             close = np.abs(ours.lidar - env.get_lidar_scan()["ranges"]) <= 0.02

@@ -65,12 +65,29 @@ SUITE_DIGESTS = {"open": "7dd5a0357ca22cea", "sparse": "f6460bdee89d46da", "clut
                  "warehouse_moving": "6b50efbdb4c008a1"}
 
 
+# The robot fields added after the digests were taken (other kinematics), left out of a digest at
+# their defaults: they describe a robot, not where the generators put anything.
+LATER_ROBOT_FIELDS = ("footprint_offset", "kinematics", "lateral_max", "lateral_min", "steer_max", "steer_min",
+                      "steer_mode", "axle_distance", "accel_lateral", "accel_steer")
+
+
+def _digest(scenarios: list[Scenario]) -> str:
+    defaults = RobotProfile().model_dump(mode="json")
+    drawn = []
+    for scenario in scenarios:
+        dumped = scenario.model_dump(mode="json")
+        for field in LATER_ROBOT_FIELDS:
+            if dumped["robot"][field] == defaults[field]:
+                del dumped["robot"][field]
+        drawn.append(dumped)
+    return hashlib.sha256(json.dumps(drawn, sort_keys=True).encode()).hexdigest()[:16]
+
+
 @pytest.mark.parametrize("kind", KINDS)
 def test_the_generated_scenarios_are_the_ones_the_figures_were_measured_on(kind):
     difficulty = SUITES[kind].difficulty
-    drawn = [generate(kind, seed, difficulty, split).model_dump(mode="json")
-             for split in ("train", "eval") for seed in range(20)]
-    assert hashlib.sha256(json.dumps(drawn, sort_keys=True).encode()).hexdigest()[:16] == SUITE_DIGESTS[kind]
+    drawn = [generate(kind, seed, difficulty, split) for split in ("train", "eval") for seed in range(20)]
+    assert _digest(drawn) == SUITE_DIGESTS[kind]
 
 
 # The same for the ends of the difficulty range and for physics3d's template (its robot's larger
@@ -91,9 +108,8 @@ def test_easiest_hardest_and_3d_robot_scenarios_are_unchanged(kind):
     from physics3d.robot import TEMPLATE
 
     def digest(difficulty: float, template: Scenario | None = None) -> str:
-        drawn = [generate(kind, seed, difficulty, split, template).model_dump(mode="json")
-                 for split in ("train", "eval") for seed in range(10)]
-        return hashlib.sha256(json.dumps(drawn, sort_keys=True).encode()).hexdigest()[:16]
+        return _digest([generate(kind, seed, difficulty, split, template)
+                        for split in ("train", "eval") for seed in range(10)])
 
     assert (digest(0.0), digest(1.0), digest(0.5, TEMPLATE)) == EDGE_DIGESTS[kind]
 

@@ -13,6 +13,7 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
+from common.drive import refuse_other_drives
 from common.readings import Readings
 from common.scenario import LidarSpec, RobotProfile
 
@@ -51,7 +52,9 @@ class Controller(ABC):
 
     def bind(self, robot: RobotProfile, lidar: LidarSpec, goal_threshold: float = 0.3) -> None:
         """Learn the robot's limits, the lidar's geometry and how close to the goal counts as
-        arrived (call before ``reset``)."""
+        arrived (call before ``reset``). Every controller here commands (v, w): a robot of other
+        kinematics is a one-line error."""
+        refuse_other_drives(robot, f"the {self.name} controller")
         self.robot = robot
         self.lidar = LidarGeometry(lidar)
         self.goal_threshold = goal_threshold

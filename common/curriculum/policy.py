@@ -20,6 +20,7 @@ import torch
 
 from common.actions import ACTION_SPACE, ActionMapping
 from common.curriculum.policy_file import MANIFEST, Manifest, Normalizer, PolicyFile
+from common.drive import refuse_other_drives
 from common.errors import ConfigError, quote
 from common.files import size_text
 from common.observations import ObservationLayout, make_layout
@@ -165,6 +166,8 @@ class PolicyAgent:
         self.home = home  # (tier, suite, first seed, episodes) of its own test figure: its evaluation by default
 
     def bind(self, robot: RobotProfile, lidar: LidarSpec, goal_threshold: float = 0.3) -> None:
+        # Policy files hold a two-number (v, w) actor: they train and drive differential drives.
+        refuse_other_drives(robot, f"the policy {self.name!r}")
         self.layout: ObservationLayout = make_layout(self.observation, robot, lidar, self.goal_distance_scale)
         self.mapping = ActionMapping(robot, self.action_mapping)
 

@@ -38,6 +38,7 @@ from common.conditions import CONDITION_KEYS, ONLY_2D, ONLY_3D, conditions_of
 from common.curriculum.hyperparams import resolve_hyperparams
 from common.curriculum.policy import algorithm_class
 from common.curriculum.policy_file import ALGORITHMS
+from common.drive import refuse_other_drives
 from common.errors import ConfigError, quote
 from common.generators import KINDS, SUITES
 from common.observations import LAYOUTS
@@ -157,6 +158,8 @@ def _check_env_kwargs(stage: StageSpec, source: str | Path, field: str) -> None:
     try:
         conditions = conditions_of(stage.env_kwargs, source, field).for_tier(stage.world)
         if conditions.profile is not None:
+            # A stage's policy file holds a (v, w) actor: it trains differential drives only.
+            refuse_other_drives(conditions.profile, "a curriculum stage")
             _check_robot_fits(stage, conditions.profile)
         if "goal_threshold" in stage.env_kwargs:
             from common.task import threshold_range

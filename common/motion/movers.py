@@ -9,6 +9,8 @@ IR-SIM, are judged, and the groups plan the next step. The movers' poses then go
 
 from __future__ import annotations
 
+import math
+
 from typing import NamedTuple
 
 import numpy as np
@@ -74,13 +76,15 @@ class Movers:
         self._states = np.empty((self.count, 8))
         self._circle_rows, self._box_rows = np.empty((len(self._circles), 3)), np.empty((len(self._boxes), 6))
         robot = scenario.robot
-        # The robot's body for contacts: shape, x, y, heading, radius, length, width.
-        self._robot = np.array([BOX if robot.shape == "box" else 0, 0.0, 0.0, 0.0, robot.bounding_radius, robot.length,
-                                robot.width])
+        # The robot's body for contacts: shape, x, y, heading, radius, length, width, and how far
+        # ahead of its pose the footprint's centre is.
+        box = robot.shape == "box"
+        self._robot = np.array([BOX if box else 0, 0.0, 0.0, 0.0, 0.5 * math.hypot(robot.length, robot.width) if box
+                                else robot.radius, robot.length, robot.width, robot.footprint_offset])
         self._outline = np.zeros((0, 2))  # the robot's polygon, for IR-SIM's view of it
         if t.irsim:
-            self._outline = rectangle_outline(robot.length, robot.width) if robot.shape == "box" else \
-                circle_outline(robot.radius)
+            self._outline = (rectangle_outline(robot.length, robot.width) if box else circle_outline(robot.radius)) \
+                + (robot.footprint_offset, 0.0)
         # finish_step's arguments before and after the robot's pose and command, gathered once:
         # gathering its thirty-odd arguments anew took a tenth of a crowd's step.
         self._before_robot = (t.F, t.I, t.params, t.goals, t.routes, t.objects, t.segments, t.outlines, t.irsim,
@@ -91,7 +95,7 @@ class Movers:
         # Its machine code for exactly these arguments: matching them to a signature anew every
         # call took a fifth of the call. The pose and command go in as floats and ``stopped`` as a
         # bool whatever their Python type (numba's unboxing converts numbers).
-        self._finish_step = compiled_for(finish_step, *self._before_robot, 0.0, 0.0, 0.0, 0.0, 0.0, False,
+        self._finish_step = compiled_for(finish_step, *self._before_robot, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False,
                                          *self._after_robot)
 
     def reset(self, pose: tuple[float, float, float]) -> None:
@@ -136,25 +140,26 @@ class Movers:
                   self._dt, self._neighbors, self._outline, t.irsim, self._robot, *pose, 0.0, 0.0, False)
 
     def finish(self, pose: tuple[float, float, float], v: float, w: float, stopped: bool,
-               rng: np.random.Generator) -> int:
-        """End the step: the robot went to ``pose`` with (v, w) (``stopped``: it was halted when the
-        step began); every mover steps (a wanderer's next goal drawn from ``rng``), is judged, and
+               rng: np.random.Generator, lateral: float = 0.0) -> int:
+        """End the step: the robot went to ``pose`` with (v, w) and sideways at ``lateral`` (an
+        omnidirectional robot; ``stopped``: it was halted when the step began); every mover steps (a wanderer's next goal drawn from ``rng``), is judged, and
         the groups plan the next step. The index (a row of :meth:`states`) of the first mover the
         robot touches, or -1."""
         t = self.table
         if self._wanderer_arrived:
             draw_wanderers(t.F, t.I, t.goals, rng)
         if self._python:
-            self._advance_in_python(pose, v, w, stopped)
+            self._advance_in_python(pose, v, w, lateral, stopped)
         x, y, yaw = pose
-        touched, self._wanderer_arrived = self._finish_step(*self._before_robot, x, y, yaw, v, w, stopped,
+        touched, self._wanderer_arrived = self._finish_step(*self._before_robot, x, y, yaw, v, w, lateral, stopped,
                                                             *self._after_robot)
         return -1 if touched < 0 else int(np.searchsorted(self._moving, touched))
 
-    def _advance_in_python(self, pose: tuple[float, float, float], v: float, w: float, stopped: bool) -> None:
+    def _advance_in_python(self, pose: tuple[float, float, float], v: float, w: float, lateral: float,
+                           stopped: bool) -> None:
         """Every mover's step, in order, with IR-SIM's rvo (NumPy) where a mover has it."""
         t = self.table
-        sync_robot(t.F, t.I, t.objects, self._outline, t.irsim, self._robot, *pose, v, w, stopped)
+        sync_robot(t.F, t.I, t.objects, self._outline, t.irsim, self._robot, *pose, v, w, lateral, stopped)
         for m in range(len(t.F)):
             if not prepare(t.F, t.I, t.goals, t.routes, t.objects, m):
                 continue

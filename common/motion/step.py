@@ -493,12 +493,15 @@ def snapshot(F, I, objects, moving, circles, boxes, states, circle_rows, box_row
 
 
 @register_jitable
-def sync_robot(F, I, objects, outline, irsim, robot, x, y, yaw, v, w, stopped) -> None:  # noqa: E741
-    """Where the controlled robot is and the command it moves with: its disc (row 0 of
-    ``objects``), its body for contacts (``robot``) and its own row if it has one (the first)."""
+def sync_robot(F, I, objects, outline, irsim, robot, x, y, yaw, v, w, lateral, stopped) -> None:  # noqa: E741
+    """Where the controlled robot is and the command it moves with (forward ``v``, turn rate
+    ``w``, sideways ``lateral``): its disc (row 0 of ``objects``), its body for contacts
+    (``robot``; its footprint's centre ``robot[7]`` ahead of the pose) and its own row if it has
+    one (the first)."""
     place_disc(objects, outline, irsim, 0, outline.shape[0], x, y, yaw)
-    objects[0, OVX], objects[0, OVY] = v * math.cos(yaw), v * math.sin(yaw)
-    robot[1], robot[2], robot[3] = x, y, yaw
+    c, s = math.cos(yaw), math.sin(yaw)
+    objects[0, OVX], objects[0, OVY] = v * c - lateral * s, v * s + lateral * c
+    robot[1], robot[2], robot[3] = x + robot[7] * c, y + robot[7] * s, yaw
     if F.shape[0] > 0 and I[0, DRIVEN] == 1:
         F[0, X], F[0, Y], F[0, THETA], F[0, V0], F[0, V1] = x, y, yaw, v, w
         I[0, STOPPED] = 1 if stopped else 0
@@ -508,14 +511,14 @@ def sync_robot(F, I, objects, outline, irsim, robot, x, y, yaw, v, w, stopped) -
 def plan_step(F, I, params, goals, objects, segments, orca_velocity, members, inside, dt, neighbors,  # noqa: E741
               outline, irsim, robot, x, y, yaw, v, w, stopped) -> None:
     """Before an episode's first step: where the robot is, then the groups' plans."""
-    sync_robot(F, I, objects, outline, irsim, robot, x, y, yaw, v, w, stopped)
+    sync_robot(F, I, objects, outline, irsim, robot, x, y, yaw, v, w, 0.0, stopped)
     if members.shape[0] > 0:
         plan_groups(F, I, params, goals, objects, segments, orca_velocity, members, inside, dt, neighbors)
 
 
 @kernel
 def finish_step(F, I, params, goals, routes, objects, segments, outlines, irsim, dt, neighbors, outline,  # noqa: E741
-                robot, x, y, yaw, v, w, stopped, advanced, mode, circles, boxes, walls, rings, ring_index, moving,
+                robot, x, y, yaw, v, w, lateral, stopped, advanced, mode, circles, boxes, walls, rings, ring_index, moving,
                 seen_circles, seen_boxes, states, circle_rows, box_rows, orca_velocity, members,
                 inside) -> tuple[int, bool]:
     """The step after the robot moved: where it is now, every mover's step (unless ``advanced``
@@ -524,7 +527,7 @@ def finish_step(F, I, params, goals, routes, objects, segments, outlines, irsim,
     the snapshot the next step would plan from, one compiled call a step saved). The first mover
     (table row) the robot touches, or -1; and whether a wanderer arrived (the next step draws its
     goal first)."""
-    sync_robot(F, I, objects, outline, irsim, robot, x, y, yaw, v, w, stopped)
+    sync_robot(F, I, objects, outline, irsim, robot, x, y, yaw, v, w, lateral, stopped)
     if not advanced:
         advance(F, I, params, goals, routes, objects, segments, outlines, irsim, dt, neighbors)
     touched = settle(F, I, goals, robot, mode, circles, boxes, walls, rings, ring_index)
