@@ -1,5 +1,6 @@
-"""How a command moves the controlled robot when it is not a differential drive: IR-SIM's
-``omni``, ``omni_angular`` and ``acker`` kinematics, with their limits.
+"""How a command moves the controlled robot when it is not a differential drive (IR-SIM's
+``omni``, ``omni_angular`` and ``acker`` kinematics, with their limits) or moves with IR-SIM's
+motion noise.
 
 A command has one number per channel (:data:`CHANNELS`): ``omni`` (forward, lateral: m/s in the
 body frame; the heading stays), ``omni_angular`` (forward, lateral, w) and ``acker`` (v and the
@@ -10,12 +11,21 @@ position advances by the body-frame velocity turned by the heading at the step's
 heading by the turn rate, so a step's path is a straight segment. A car turns at
 v tan(steer) / axle_distance with the steering angle the step began with, as IR-SIM's
 ``ackermann_kinematics`` has it. The differential drive keeps its own path (:mod:`common.kinematics`
-and flatland's compiled step).
+and flatland's compiled step) unless it has motion noise.
+
+Motion noise (``RobotProfile.motion_noise``, IR-SIM's ``alpha``) perturbs the clipped command
+before it moves the robot, drawn as IR-SIM draws it, so a seeded world moves alike in both:
+a differential drive or a car gets N(0, α0 c0² + α1 c1²) on its first channel and N(0, α2 c0² +
+α3 c1²) on its second (c: the clipped command), an omnidirectional robot N(0, αi) on channel i.
+The acceleration window and the readings keep the command as given; the odometry integrates it,
+so the noise is what dead reckoning does not see.
 """
 
 from __future__ import annotations
 
 import math
+
+import numpy as np
 
 from common.errors import ConfigError, quote
 from common.kinematics import Pose2D, wrap_angle
@@ -27,6 +37,9 @@ CHANNELS: dict[str, tuple[str, ...]] = {
     "omni_angular": ("v", "lateral", "w"),
     "acker": ("v", "steer"),
 }
+NOISE_SIZES = {"diff": 4, "omni": 2, "omni_angular": 3, "acker": 4}  # IR-SIM's alpha per kinematics
+DEFAULT_NOISE = {"diff": (0.03, 0.0, 0.0, 0.03), "omni": (0.03, 0.03), "omni_angular": (0.03, 0.03, 0.03),
+                 "acker": (0.03, 0.0, 0.0, 0.03)}  # IR-SIM's alpha when noise is on and alpha is not given
 
 
 def refuse_other_drives(robot: RobotProfile, who: str) -> None:
@@ -66,6 +79,7 @@ class Drive:
         self._dt = dt
         self._steers = robot.steer_mode == "steer"
         self._axle = robot.axle_distance
+        self._alpha = robot.motion_noise
         self.reset()
 
     def reset(self, steer: float = 0.0) -> None:
@@ -91,15 +105,39 @@ class Drive:
             clipped.append(min(value, high))
         return clipped
 
-    def move(self, command: tuple[float, ...]) -> tuple[float, float, float]:
-        """Clip ``command``, take it as the last one, and return the body velocity it moves the
-        robot with this step: (forward, lateral, turn rate)."""
+    def move(self, command: tuple[float, ...], rng: np.random.Generator | None = None
+             ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """Clip ``command`` and take it as the last one; the body velocity (forward, lateral,
+        turn rate) it commands, and the one it moves the robot with this step (with the motion
+        noise, drawn from ``rng``, if the robot has any)."""
         clipped = self.last = self.clip(command)
+        real = clipped if self._alpha is None else self._noisy(clipped, rng)
+        commanded = self._body(clipped, self.steer)
+        moved = commanded if real is clipped else self._body(real, self.steer)
+        if self.kinematics == "acker":
+            steer = real[1]
+            self.steer = steer if self._steers else self.steer + steer * self._dt
+        return commanded, moved
+
+    def _body(self, channels: list[float], steer: float) -> tuple[float, float, float]:
+        if self.kinematics == "diff":
+            return channels[0], 0.0, channels[1]
         if self.kinematics == "omni":
-            return clipped[0], clipped[1], 0.0
+            return channels[0], channels[1], 0.0
         if self.kinematics == "omni_angular":
-            return clipped[0], clipped[1], clipped[2]
-        v, steer = clipped
-        turn = math.tan(self.steer) / self._axle * v
-        self.steer = steer if self._steers else self.steer + steer * self._dt
-        return v, 0.0, turn
+            return channels[0], channels[1], channels[2]
+        v = channels[0]
+        return v, 0.0, math.tan(steer) / self._axle * v
+
+    def _noisy(self, clipped: list[float], rng: np.random.Generator) -> list[float]:
+        """IR-SIM's draw: one normal per channel, in one call of its shape (a column)."""
+        alpha = self._alpha
+        size = len(clipped)
+        if self.kinematics in ("diff", "acker"):
+            first, second = clipped
+            scale = [[np.sqrt(alpha[0] * first ** 2 + alpha[1] * second ** 2)],
+                     [np.sqrt(alpha[2] * first ** 2 + alpha[3] * second ** 2)]]
+        else:
+            scale = [[np.sqrt(a)] for a in alpha[:size]]
+        drawn = rng.normal([[0]] * size, scale=scale)
+        return [value + float(drawn[k, 0]) for k, value in enumerate(clipped)]

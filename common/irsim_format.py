@@ -41,7 +41,7 @@ from typing import Any, Callable, Hashable, NamedTuple
 import numpy as np
 from pydantic import ValidationError
 
-from common.drive import CHANNELS as DRIVE_CHANNELS
+from common.drive import CHANNELS as DRIVE_CHANNELS, DEFAULT_NOISE, NOISE_SIZES
 from common.errors import ConfigError, quote
 from common.irsim_values import (
     Entry,
@@ -530,7 +530,7 @@ def _kinematics_name(entry: Entry, path: str) -> str | None:
 
 
 def _check_drive(entry: Entry, path: str) -> None:
-    """The controlled robot must be driven by one of IR-SIM's kinematics, move, and have no motion noise."""
+    """The controlled robot must be driven by one of IR-SIM's kinematics and move."""
     item = value_of(entry, "kinematics", None, path)
     allowed = f"allowed: {{name: {' | '.join(DRIVE_CHANNELS)}}}"
     if item.value is None:
@@ -540,12 +540,8 @@ def _check_drive(entry: Entry, path: str) -> None:
     if not isinstance(name, str) or name.lower() not in DRIVE_CHANNELS:
         raise fail(item.path, f"unsupported kinematics {quote(name)} for the controlled robot; {allowed}")
     check_keys(kinematics, KINEMATICS_KEYS if name.lower() == "acker" else DIFF_KINEMATICS_KEYS, item.path)
-    if boolean(kinematics.get("noise", False), join(item.path, "noise")):
-        raise fail(join(item.path, "noise"), "motion noise is not modelled; allowed: false")
     if name.lower() == "acker":
         string(kinematics.get("mode", "steer"), join(item.path, "mode"), ("steer", "angular"))
-    if boolean(value_of(entry, "static", False, path).value, join(path, "static")):
-        raise fail(join(path, "static"), "a static robot cannot be driven; allowed: false")
     size = len(DRIVE_CHANNELS[name.lower()])
     velocity = value_of(entry, "velocity", [0] * size, path)
     if any(v != 0 for v in number_list(velocity.value, velocity.path, size=size)):
@@ -579,6 +575,14 @@ def _robot_profile(entry: Entry, shape: _Shape, path: str) -> RobotProfile:
     shape_path = value_of(entry, "shape", None, path).path
     fields = {"kinematics": Value(name, join(kinematics.path, "name")),
               "footprint_offset": Value(float(shape.points[0, 0]), shape_path)}
+    static = value_of(entry, "static", False, path)
+    if boolean(static.value, static.path):
+        fields["static"] = Value(True, static.path)
+    settings = kinematics.value
+    if boolean(settings.get("noise", False), join(kinematics.path, "noise")):
+        alpha = settings.get("alpha")
+        fields["motion_noise"] = Value(DEFAULT_NOISE[name] if alpha is None else tuple(
+            number_list(alpha, join(kinematics.path, "alpha"), min_size=NOISE_SIZES[name])), join(kinematics.path, "alpha"))
     for channel, low, high, acceleration in zip(channels, lows, highs, accelerations):
         if low > high:
             raise fail(vel_min.path, f"{channel} minimum {low:g} exceeds vel_max's {high:g}; allowed: at most vel_max")
@@ -587,7 +591,7 @@ def _robot_profile(entry: Entry, shape: _Shape, path: str) -> RobotProfile:
                        acceleration_field: Value(acceleration, acce.path)})
     if name == "acker":
         # The wheelbase under kinematics wins over the shape's, as in IR-SIM (default 1).
-        settings, outline = kinematics.value, value_of(entry, "shape", None, path).value or {}
+        outline = value_of(entry, "shape", None, path).value or {}
         wheelbase = settings.get("wheelbase", outline.get("wheelbase") if isinstance(outline, dict) else None)
         fields["axle_distance"] = Value(1.0 if wheelbase is None else real(wheelbase, join(kinematics.path, "wheelbase"),
                                                                             0, strict=True), kinematics.path)
@@ -657,7 +661,7 @@ def _object(entry: Entry, path: str, draws: _Draws, role: str) -> Any:
 
 
 _DRIVE_KEYS = ("kinematics", "static", "velocity", "state")
-_PROFILE_KEYS = ("kinematics", "vel_min", "vel_max", "acce")  # and the footprint read, which is keyed on its shape
+_PROFILE_KEYS = ("kinematics", "static", "vel_min", "vel_max", "acce")  # and the footprint read, which is keyed on its shape
 
 
 def _parse(data: dict, source: str | Path | None, draws: _Draws) -> Scenario:

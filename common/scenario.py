@@ -181,7 +181,9 @@ class RobotProfile(Frozen):
     v in [0, v_max] and w in [-w_max, w_max] (other kinematics: :mod:`common.actions`); the minima
     and the acceleration limits (m/s², rad/s²) constrain raw ``World.step`` commands, as IR-SIM's
     ``vel_min`` and ``acce`` do. ``footprint_offset``: how far ahead of the robot's reference point
-    (its pose, a car's rear axle) the footprint's centre sits.
+    (its pose, a car's rear axle) the footprint's centre sits. ``motion_noise``: IR-SIM's ``alpha``
+    of its kinematics' motion noise (:mod:`common.drive`; None: none). ``static``: the robot never
+    moves, whatever it is commanded (IR-SIM's static robot, a sensor on a post).
     """
 
     shape: Literal["circle", "box"] = "circle"
@@ -207,6 +209,8 @@ class RobotProfile(Frozen):
     accel_lateral: Acceleration = math.inf
     accel_steer: Acceleration = math.inf
     encoder_noise: Fraction = 0.0
+    motion_noise: tuple[Annotated[float, Field(ge=0.0, le=100.0)], ...] | None = None
+    static: bool = False
 
     @model_validator(mode="after")
     def _limits_ordered(self) -> "RobotProfile":
@@ -221,6 +225,10 @@ class RobotProfile(Frozen):
                              "car on the spot; allowed: below 1.5 rad")
         if self.kinematics != "diff" and self.encoder_noise > 0:
             raise ValueError(f"encoder_noise models a differential drive's wheels; allowed: 0 for {self.kinematics}")
+        sizes = {"diff": 4, "omni": 2, "omni_angular": 3, "acker": 4}  # common.drive.NOISE_SIZES
+        if self.motion_noise is not None and len(self.motion_noise) < sizes[self.kinematics]:
+            raise ValueError(f"motion_noise of a {self.kinematics} robot takes {sizes[self.kinematics]} values "
+                             f"(IR-SIM's alpha), got {len(self.motion_noise)}")
         return self
 
     @property

@@ -63,7 +63,8 @@ class World:
     (clipped to the robot's limits and acceleration window) for one ``step_time`` and returns a
     :class:`Readings` snapshot. A robot of other kinematics takes its own command
     (:mod:`common.drive`: ``step(forward, lateral)`` for ``omni``, and so on); its readings'
-    velocity is (forward speed, turn rate) and its odometry is exact. ``conditions`` (:mod:`common.conditions`; flatland's defaults: an
+    velocity is (forward speed, turn rate) as commanded, and its odometry integrates the command
+    (exact unless motion noise or a contact moved it otherwise). ``conditions`` (:mod:`common.conditions`; flatland's defaults: an
     ideal robot) may change the robot, its sensors' noise and its actuation; ``world.scenario`` is
     the scenario as conditioned.
 
@@ -98,7 +99,8 @@ class World:
         self._build_robot(scenario)
         self._integrate = INTEGRATORS[scenario.world.integrator]
         self.odometry = WheelOdometry(robot.wheel_radius, robot.wheel_base, robot.encoder_noise, self.rng, self._integrate)
-        self.drive = None if robot.kinematics == "diff" else Drive(robot, scenario.world.step_time)
+        self.drive = None if robot.kinematics == "diff" and robot.motion_noise is None else \
+            Drive(robot, scenario.world.step_time)
         # Encoder noise is drawn before the scan's: with it, the whole step stays in Python to keep
         # that order. The compiled step moves a differential drive only.
         self._compiled = robot.encoder_noise == 0.0 and self.drive is None
@@ -120,6 +122,7 @@ class World:
         self.pose = scenario.start_pose
         self.velocity = (0.0, 0.0)
         self.stopped = False
+        self._static = robot.static
         self._touching_static = False
         self.steps = 0
         self.readings: Readings | None = None
@@ -279,13 +282,13 @@ class World:
         ranges = None
         movers = self.movers
         lateral = 0.0
-        if self.stopped:
+        if self.stopped or self._static:
             v = w = 0.0
             if self.drive is not None:
                 self.drive.halt()
         elif self.drive is not None:
-            v, lateral, w = self.drive.move(command)
-            self.pose, self._touching_static = self._move(self.pose, v, w, lateral=lateral)
+            (v, lateral, w), moved = self.drive.move(command, self.rng)
+            self.pose, self._touching_static = self._move(self.pose, moved[0], moved[2], lateral=moved[1])
         else:
             v, w = command
             v, w = self._clip(float(v), float(w))
@@ -298,8 +301,9 @@ class World:
             else:
                 self._touching_static = False
         if self.drive is not None:
+            # The command, integrated as the robot would have moved without motion noise.
             odometry = self.odometry
-            odometry.pose, odometry.v, odometry.w = self.pose, v, w
+            odometry.pose, odometry.v, odometry.w = body_euler(odometry.pose, v, lateral, w, self._dt), v, w
         elif ranges is None:
             left, right = wheel_speeds(v, w, self.odometry.wheel_radius, self.odometry.wheel_base)
             self.odometry.update(left, right, self._dt)

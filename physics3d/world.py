@@ -54,10 +54,15 @@ def refuse_unmodelled(scenario: Scenario) -> None:
     (here the robot collides with what it touches; a world that loaded and then behaved otherwise
     would be wrong without a word). ``unobstructed_obstacles`` is modelled: the robot stops on a
     contact, as in ``stop``, and the movers pass on as :mod:`common.motion` moves them. The robot
-    is the URDF's differential drive: a scenario's car or omnidirectional robot is refused."""
+    is the URDF's differential drive: a scenario's car or omnidirectional robot is refused, and so
+    are IR-SIM's motion noise and static robot."""
     if scenario.robot.kinematics != "diff":
         raise ConfigError(None, "robot.kinematics", f"the 3D robot is a differential drive, not "
                           f"{quote(scenario.robot.kinematics)}; allowed: diff")
+    for field, value in (("motion_noise", scenario.robot.motion_noise), ("static", scenario.robot.static or None)):
+        if value is not None:
+            raise ConfigError(None, f"robot.{field}", "IR-SIM's kinematic stand-in is not modelled in the 3D tier, "
+                              "whose robot moves by physics; allowed: null (motion_noise), false (static)")
     if scenario.world.collision_mode == "unobstructed":
         raise ConfigError(None, "world.collision_mode", "'unobstructed' is not modelled in the 3D tier; "
                           "allowed: stop, unobstructed_obstacles")

@@ -1,6 +1,6 @@
-"""The controlled robot's kinematics other than diff (common.drive): IR-SIM's omni, omni_angular
-and acker, in flatland step for step as IR-SIM moves them, in the gym env's action space, and
-refused with one line where only a differential drive will do."""
+"""The controlled robot's kinematics other than diff and its motion noise (common.drive): IR-SIM's
+omni, omni_angular and acker, in flatland step for step as IR-SIM moves them, in the gym env's
+action space, and refused with one line where only a differential drive will do."""
 
 from __future__ import annotations
 
@@ -27,7 +27,12 @@ ROBOTS = {
     "acker": {"kinematics": {"name": "acker"}, "shape": {"name": "rectangle", "length": 1.0, "width": 0.6,
                                                         "wheelbase": 0.7},
               "vel_max": [1.5, 0.5], "vel_min": [-1.0, -0.5], "acce": [3.0, 2.0]},
-    "acker_angular": {"kinematics": {"name": "acker", "mode": "angular", "wheelbase": 0.6},
+    # IR-SIM's motion noise, drawn from the world's generator in IR-SIM's order: equal draws.
+    "diff_noisy": {"kinematics": {"name": "diff", "noise": True, "alpha": [0.1, 0.0, 0.02, 0.3]},
+                   "shape": {"name": "circle", "radius": 0.3}, "vel_min": [-1.0, -1.5], "vel_max": [1.5, 1.5]},
+    "omni_angular_noisy": {"kinematics": {"name": "omni_angular", "noise": True},
+                           "shape": {"name": "rectangle", "length": 0.6, "width": 0.4}},
+    "acker_angular": {"kinematics": {"name": "acker", "mode": "angular", "wheelbase": 0.6, "noise": True},
                       "shape": {"name": "circle", "radius": 0.4, "wheelbase": 0.7},
                       "vel_max": [1.5, 0.8], "vel_min": [-1.0, -0.8]},
 }
@@ -88,25 +93,53 @@ def test_each_kinematics_moves_and_collides_as_irsim_does(name, tmp_path):
     assert collided >= 0, "no run of commands collided: the contact was never compared"
 
 
+def test_motion_noise_moves_the_robot_where_the_command_alone_would_not_and_odometry_does_not_see_it():
+    from flatland.world import World
+
+    def drive(noise):
+        robot = RobotProfile(v_max=1.0, w_max=1.0, motion_noise=noise)
+        world = World(Scenario(robot=robot, start=(2.0, 2.0, 0.0), goal=(8.0, 8.0)), seed=4)
+        world.reset()
+        for _ in range(30):
+            readings = world.step(0.8, 0.3)
+        return readings
+
+    quiet, noisy, again = drive(None), drive((0.1, 0.0, 0.0, 0.3)), drive((0.1, 0.0, 0.0, 0.3))
+    assert noisy.pose == again.pose  # seeded
+    assert math.dist(noisy.pose[:2], quiet.pose[:2]) > 0.05
+    # The odometry integrates the command: without noise the pose itself, with it the noise-free path.
+    assert np.allclose(quiet.odometry.pose, quiet.pose, atol=1e-9)
+    assert np.allclose(noisy.odometry.pose, quiet.pose, atol=1e-9)
+
+
+def test_a_static_robot_stays_where_it_is_whatever_it_is_commanded():
+    from flatland.world import World
+
+    world = World(Scenario(robot=RobotProfile(static=True), start=(2.0, 2.0, 0.5), goal=(8.0, 8.0)))
+    world.reset()
+    readings = world.step(1.0, 1.0)
+    assert readings.pose == (2.0, 2.0, 0.5) and readings.velocity == (0.0, 0.0) and not readings.collided
+
+
 def test_the_acceleration_window_and_the_limits_clip_each_channel_as_irsim_does():
     robot = RobotProfile(kinematics="omni_angular", v_min=-1.0, v_max=1.0, lateral_max=0.5, w_max=2.0,
                          accel_v=1.0, accel_lateral=10.0, accel_w=5.0)
     drive = Drive(robot, dt=0.1)
     # Forward reaches 0.1 of its 1.0 a step; lateral is capped at 0.5; w's window is 0.5 a step.
-    assert drive.move((5.0, 5.0, -5.0)) == pytest.approx((0.1, 0.5, -0.5))
-    assert drive.move((5.0, -5.0, 5.0)) == pytest.approx((0.2, -0.5, 0.0))
+    assert drive.move((5.0, 5.0, -5.0))[0] == pytest.approx((0.1, 0.5, -0.5))
+    assert drive.move((5.0, -5.0, 5.0))[0] == pytest.approx((0.2, -0.5, 0.0))
     # A window wholly above the limit (last 2.0, reach 1.0) leaves the limit, as NumPy's clip does
     # (raised to the window's low end, then lowered to the high end).
     drive = Drive(RobotProfile(kinematics="omni", lateral_max=0.2, accel_lateral=1.0), dt=1.0)
     drive.last = [0.0, 2.0]
-    assert drive.move((0.0, -1.0))[1] == pytest.approx(0.2)
+    assert drive.move((0.0, -1.0))[0][1] == pytest.approx(0.2)
 
 
 def test_a_car_turns_with_the_steering_angle_it_began_the_step_with():
     robot = RobotProfile(kinematics="acker", v_max=2.0, steer_max=0.5, axle_distance=2.0)
     drive = Drive(robot, dt=0.1)
-    assert drive.move((1.0, 0.4)) == (1.0, 0.0, 0.0)  # wheels were straight
-    assert drive.move((1.0, 0.0))[2] == pytest.approx(math.tan(0.4) / 2.0)
+    assert drive.move((1.0, 0.4))[0] == (1.0, 0.0, 0.0)  # wheels were straight
+    assert drive.move((1.0, 0.0))[0][2] == pytest.approx(math.tan(0.4) / 2.0)
     angular = Drive(robot.model_copy(update={"steer_mode": "angular"}), dt=0.1)
     angular.move((1.0, 0.5))
     assert angular.steer == pytest.approx(0.05)  # a rate: 0.5 rad/s for 0.1 s
@@ -146,6 +179,8 @@ def test_controllers_policies_curricula_and_the_3d_tier_refuse_another_drive_in_
         make_controller("potential_field").bind(omni, LidarSpec())
     with pytest.raises(ConfigError, match="robot.kinematics: the 3D robot is a differential drive, not 'omni'"):
         World(Scenario(robot=omni))
+    with pytest.raises(ConfigError, match="robot.motion_noise: IR-SIM's kinematic stand-in is not modelled"):
+        World(Scenario(robot=RobotProfile(motion_noise=(0.1, 0, 0, 0.1))))
     curriculum = yaml.safe_load((Path(__file__).resolve().parents[1] / "curricula" / "stage1_2d.yaml").read_text())
     curriculum["stages"][0]["env_kwargs"]["robot"] = {"kinematics": "omni"}
     path = tmp_path / "omni.yaml"
