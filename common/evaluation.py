@@ -90,10 +90,11 @@ class SocialRecord:
             return
         rows = movers.rows[people]
         x, y, yaw = readings.pose
+        c, s = math.cos(yaw), math.sin(yaw)
+        x, y = x + self.robot.footprint_offset * c, y + self.robot.footprint_offset * s  # the footprint's centre
         if self.robot.shape == "circle":
             gaps = np.hypot(rows[:, 0] - x, rows[:, 1] - y) - self.robot.radius - rows[:, 5]
         else:
-            c, s = math.cos(yaw), math.sin(yaw)
             gaps = np.array([box_distance(px, py, x, y, self.robot.length, self.robot.width, c, s) - r
                              for px, py, r in rows[:, [0, 1, 5]]])
         nearest = float(gaps.min())

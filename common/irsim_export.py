@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from common.drive import channel_limits
 from common.errors import ConfigError
 from common.motion.spec import Dash, Motion, Orca
 from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario
@@ -125,17 +126,26 @@ def scenario_to_irsim(scenario: Scenario) -> dict[str, Any]:
     """The IR-SIM world mapping of a scenario (dump it with ``yaml.safe_dump``)."""
     world, robot, lidar = scenario.world, scenario.robot, scenario.lidar
     if robot.shape == "circle":
-        shape = {"name": "circle", "radius": robot.radius}
+        shape = {"name": "circle", "radius": robot.radius, "center": [robot.footprint_offset, 0.0]}
     else:
-        shape = {"name": "rectangle", "length": robot.length, "width": robot.width}
+        # IR-SIM puts a rectangle half its shape's wheelbase ahead of the pose.
+        shape = {"name": "rectangle", "length": robot.length, "width": robot.width,
+                 **({"wheelbase": 2.0 * robot.footprint_offset} if robot.footprint_offset else {})}
+    kinematics: dict[str, Any] = {"name": robot.kinematics}
+    if robot.kinematics == "acker":
+        kinematics.update(mode=robot.steer_mode, wheelbase=robot.axle_distance)
+    if robot.motion_noise is not None:
+        kinematics.update(noise=True, alpha=list(robot.motion_noise))
+    limits = channel_limits(robot)
     robot_entry: dict[str, Any] = {
-        "kinematics": {"name": "diff"},
+        "kinematics": kinematics,
         "shape": shape,
-        "state": list(scenario.start),
+        "state": list(scenario.start) + ([0.0] if robot.kinematics == "acker" else []),
         "goal": [*scenario.goal, 0.0],
         "goal_threshold": scenario.goal_threshold,
-        "vel_min": [robot.v_min, robot.w_low],
-        "vel_max": [robot.v_max, robot.w_max],
+        "vel_min": [low for low, _, _ in limits],
+        "vel_max": [high for _, high, _ in limits],
+        **({"static": True} if robot.static else {}),
         "sensors": [{
             "name": "lidar2d", "range_min": lidar.range_min, "range_max": lidar.range_max,
             # IR-SIM spreads beams over linspace(-range/2, range/2): a full circle's evenly spaced
@@ -145,8 +155,8 @@ def scenario_to_irsim(scenario: Scenario) -> dict[str, Any]:
             "noise": lidar.noise_std > 0, "std": lidar.noise_std,
         }],
     }
-    if math.isfinite(robot.accel_v) or math.isfinite(robot.accel_w):
-        robot_entry["acce"] = [robot.accel_v, robot.accel_w]
+    if any(math.isfinite(acceleration) for _, _, acceleration in limits):
+        robot_entry["acce"] = [acceleration for _, _, acceleration in limits]
     robots, obstacles = _groups(scenario)
     if world.walls:
         x0, y0 = world.offset

@@ -108,15 +108,16 @@ class Renderer:
         """Move the robot, its beams and its path to ``readings``."""
         x, y, yaw = readings.pose
         robot = self.scenario.robot
+        c, s = math.cos(yaw), math.sin(yaw)
+        ahead = robot.footprint_offset  # the footprint's centre ahead of the pose (a car's rear axle)
         if isinstance(self.robot_patch, patches.Circle):
-            self.robot_patch.center = (x, y)
-            reach = robot.radius
+            self.robot_patch.center = (x + ahead * c, y + ahead * s)
+            reach = ahead + robot.radius
         else:
-            c, s = math.cos(yaw), math.sin(yaw)
             hl, hw = 0.5 * robot.length, 0.5 * robot.width
-            local = np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]])
+            local = np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]]) + (ahead, 0.0)
             self.robot_patch.set_xy(local @ np.array([[c, s], [-s, c]]) + (x, y))
-            reach = hl
+            reach = ahead + hl
         self.heading_line.set_data([x, x + reach * math.cos(yaw)], [y, y + reach * math.sin(yaw)])
         lidar = self.scenario.lidar
         ox = x + math.cos(yaw) * lidar.offset[0] - math.sin(yaw) * lidar.offset[1]

@@ -6,12 +6,13 @@ import numpy as np
 import pytest
 import yaml
 
+from common.drive import channel_limits
 from common.errors import ConfigError
 from common.generators import generate
 from common.irsim_export import scenario_to_irsim
 from common.irsim_format import parse_irsim
 from common.motion.spec import Dash, Motion, Orca, Sfm
-from common.scenario import CircleObstacle
+from common.scenario import CircleObstacle, RobotProfile
 from tests.conftest import optional
 
 
@@ -33,6 +34,23 @@ def test_movers_read_back_from_their_irsim_file(tmp_path):
     for mine, read in zip(ours, theirs):
         assert read.motion.behavior == mine.motion.behavior and read.motion.vel_max == mine.motion.vel_max
         assert read.motion.route_from((read.x, read.y)) == mine.motion.route_from((mine.x, mine.y))
+
+
+@pytest.mark.parametrize("robot", [
+    RobotProfile(shape="box", length=0.5, width=0.3, v_min=-0.5, accel_v=2.0, accel_w=3.0),
+    RobotProfile(kinematics="omni", lateral_max=0.7, accel_lateral=1.5, motion_noise=(0.1, 0.2)),
+    RobotProfile(kinematics="omni_angular", shape="box", length=0.6, width=0.4, static=True),
+    RobotProfile(kinematics="acker", shape="box", length=1.0, width=0.6, footprint_offset=0.35, steer_max=0.5,
+                 axle_distance=0.7, steer_mode="angular", accel_steer=1.0),
+    RobotProfile(kinematics="acker", radius=0.4, footprint_offset=0.2, motion_noise=(0.1, 0.0, 0.0, 0.2)),
+], ids=["diff box", "omni", "omni_angular", "car", "round car"])
+def test_the_robot_reads_back_from_its_irsim_file(robot, tmp_path):
+    scenario = generate("sparse", 1).model_copy(update={"robot": robot})
+    back = parse_irsim(scenario_to_irsim(scenario), source=tmp_path / "w.yaml").robot
+    # IR-SIM has no wheels, and writes each minimum out where a profile may leave it to the maximum.
+    apart = {"wheel_radius", "wheel_base", "w_min", "lateral_min", "steer_min"}
+    assert back.model_dump(exclude=apart) == robot.model_dump(exclude=apart)
+    assert channel_limits(back) == channel_limits(robot)
 
 
 @pytest.mark.slow
