@@ -127,6 +127,8 @@ def scenario_to_irsim(scenario: Scenario) -> dict[str, Any]:
     world, robot, lidar = scenario.world, scenario.robot, scenario.lidar
     if robot.shape == "circle":
         shape = {"name": "circle", "radius": robot.radius, "center": [robot.footprint_offset, 0.0]}
+    elif robot.shape == "polygon":
+        shape = {"name": "polygon", "vertices": [list(vertex) for vertex in robot.vertices]}
     else:
         # IR-SIM puts a rectangle half its shape's wheelbase ahead of the pose.
         shape = {"name": "rectangle", "length": robot.length, "width": robot.width,

@@ -111,7 +111,7 @@ SHAPE_KEYS = {
     "linestring": ("name", "vertices", *_RANDOM_POLYGON_KEYS),
 }
 OBSTACLE_SHAPES = ("circle", "rectangle", "polygon", "linestring")
-ROBOT_SHAPES = ("circle", "rectangle")  # the footprints RobotProfile can express
+ROBOT_SHAPES = ("circle", "rectangle", "polygon")  # the footprints RobotProfile can express
 DISTRIBUTION_KEYS = ("name", "range_low", "range_high", "min_distance", "radius", "center", "3d")
 # What one file may cost (IR-SIM has no caps): a shared file must be answered quickly, whatever it holds.
 MAX_OBJECTS = MAX_OBSTACLES + 1  # robots and obstacles, after ``number`` fan-out, across the file
@@ -559,7 +559,7 @@ _CHANNEL_FIELDS = {"v": ("v_min", "v_max", "accel_v"), "w": ("w_min", "w_max", "
 
 def _robot_profile(entry: Entry, shape: _Shape, path: str) -> RobotProfile:
     """Footprint, kinematics, velocity limits and acceleration limits of the controlled robot."""
-    if np.any(shape.points[:, 1] != 0):
+    if shape.kind != "polygon" and np.any(shape.points[:, 1] != 0):
         raise fail(join(path, "shape.center"), "a footprint off the robot's heading line is not supported; "
                    "allowed: a centre [x, 0]")
     kinematics = value_of(entry, "kinematics", None, path)
@@ -573,8 +573,9 @@ def _robot_profile(entry: Entry, shape: _Shape, path: str) -> RobotProfile:
     highs = number_list(vel_max.value, vel_max.path, size=size, allow_inf=True)
     accelerations = number_list(acce.value, acce.path, size=size, allow_inf=True)
     shape_path = value_of(entry, "shape", None, path).path
-    fields = {"kinematics": Value(name, join(kinematics.path, "name")),
-              "footprint_offset": Value(float(shape.points[0, 0]), shape_path)}
+    fields = {"kinematics": Value(name, join(kinematics.path, "name"))}
+    if shape.kind != "polygon":
+        fields["footprint_offset"] = Value(float(shape.points[0, 0]), shape_path)
     static = value_of(entry, "static", False, path)
     if boolean(static.value, static.path):
         fields["static"] = Value(True, static.path)
@@ -598,6 +599,9 @@ def _robot_profile(entry: Entry, shape: _Shape, path: str) -> RobotProfile:
         fields["steer_mode"] = Value(settings.get("mode", "steer"), join(kinematics.path, "mode"))
     if shape.kind == "circle":
         fields.update(shape=Value("circle", shape_path), radius=Value(shape.radius, shape_path))
+    elif shape.kind == "polygon":
+        fields.update(shape=Value("polygon", shape_path),
+                      vertices=Value(tuple(map(tuple, shape.points.tolist())), join(shape_path, "vertices")))
     else:
         fields.update(shape=Value("box", shape_path), length=Value(shape.length, shape_path),
                       width=Value(shape.width, shape_path))

@@ -181,15 +181,17 @@ class RobotProfile(Frozen):
     v in [0, v_max] and w in [-w_max, w_max] (other kinematics: :mod:`common.actions`); the minima
     and the acceleration limits (m/s², rad/s²) constrain raw ``World.step`` commands, as IR-SIM's
     ``vel_min`` and ``acce`` do. ``footprint_offset``: how far ahead of the robot's reference point
-    (its pose, a car's rear axle) the footprint's centre sits. ``motion_noise``: IR-SIM's ``alpha``
+    (its pose, a car's rear axle) the footprint's centre sits; a ``polygon`` footprint is its
+    ``vertices`` in the robot frame (flatland only). ``motion_noise``: IR-SIM's ``alpha``
     of its kinematics' motion noise (:mod:`common.drive`; None: none). ``static``: the robot never
     moves, whatever it is commanded (IR-SIM's static robot, a sensor on a post).
     """
 
-    shape: Literal["circle", "box"] = "circle"
+    shape: Literal["circle", "box", "polygon"] = "circle"
     radius: Length = 0.2
     length: Length = 0.3
     width: Length = 0.2
+    vertices: Annotated[tuple[tuple[Coordinate, Coordinate], ...], Field(max_length=MAX_VERTICES)] | None = None
     footprint_offset: Annotated[float, Field(ge=-MAX_LENGTH, le=MAX_LENGTH)] = 0.0
     kinematics: Literal["diff", "omni", "omni_angular", "acker"] = "diff"
     wheel_radius: Length = 0.05
@@ -223,6 +225,13 @@ class RobotProfile(Frozen):
         if self.kinematics == "acker" and self.steer_mode == "steer" and max(self.steer_max, -self.steer_low) >= 1.5:
             raise ValueError(f"a steering angle limit of {max(self.steer_max, -self.steer_low):g} rad turns the "
                              "car on the spot; allowed: below 1.5 rad")
+        if (self.shape == "polygon") != (self.vertices is not None):
+            raise ValueError("a polygon footprint takes its vertices (x, y in the robot frame), and only it; "
+                             "allowed: shape: polygon with vertices, or no vertices")
+        if self.vertices is not None and not is_simple_polygon(np.asarray(self.vertices, dtype=float)):
+            raise ValueError("the footprint crosses itself or has no area; allowed: a simple polygon, vertices in order")
+        if self.vertices is not None and self.footprint_offset:
+            raise ValueError("a polygon footprint's vertices place it; allowed: footprint_offset 0")
         if self.kinematics != "diff" and self.encoder_noise > 0:
             raise ValueError(f"encoder_noise models a differential drive's wheels; allowed: 0 for {self.kinematics}")
         sizes = {"diff": 4, "omni": 2, "omni_angular": 3, "acker": 4}  # common.drive.NOISE_SIZES
@@ -250,6 +259,8 @@ class RobotProfile(Frozen):
     def bounding_radius(self) -> float:
         """Radius of the smallest circle about the reference point around the footprint (the
         conservative clearance)."""
+        if self.vertices is not None:
+            return max(math.hypot(x, y) for x, y in self.vertices)
         half = self.radius if self.shape == "circle" else 0.5 * math.hypot(self.length, self.width)
         return half + abs(self.footprint_offset)
 

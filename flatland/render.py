@@ -62,7 +62,8 @@ class Renderer:
         if robot.shape == "circle":
             self.robot_patch: patches.Patch = patches.Circle((0, 0), robot.radius, facecolor="tab:blue", alpha=0.8)
         else:
-            self.robot_patch = patches.Polygon(np.zeros((4, 2)), closed=True, facecolor="tab:blue", alpha=0.8)
+            corners = 4 if robot.vertices is None else len(robot.vertices)
+            self.robot_patch = patches.Polygon(np.zeros((corners, 2)), closed=True, facecolor="tab:blue", alpha=0.8)
         self.axes.add_patch(self.robot_patch)
         (self.heading_line,) = self.axes.plot([], [], color="white", linewidth=1.5)
         (self.path_line,) = self.axes.plot([], [], color="tab:blue", linewidth=1.0, alpha=0.7)
@@ -115,9 +116,10 @@ class Renderer:
             reach = ahead + robot.radius
         else:
             hl, hw = 0.5 * robot.length, 0.5 * robot.width
-            local = np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]]) + (ahead, 0.0)
+            local = np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]]) + (ahead, 0.0) if robot.vertices is None \
+                else np.asarray(robot.vertices, dtype=float)
             self.robot_patch.set_xy(local @ np.array([[c, s], [-s, c]]) + (x, y))
-            reach = ahead + hl
+            reach = float(local[:, 0].max())
         self.heading_line.set_data([x, x + reach * math.cos(yaw)], [y, y + reach * math.sin(yaw)])
         lidar = self.scenario.lidar
         ox = x + math.cos(yaw) * lidar.offset[0] - math.sin(yaw) * lidar.offset[1]

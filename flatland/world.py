@@ -230,17 +230,23 @@ class World:
         self.body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
         ahead = robot.footprint_offset
         if robot.shape == "circle":
-            self.footprint: pymunk.Shape = pymunk.Circle(self.body, robot.radius, (ahead, 0.0))
-        else:
+            pieces: list[pymunk.Shape] = [pymunk.Circle(self.body, robot.radius, (ahead, 0.0))]
+        elif robot.shape == "box":
             half_length, half_width = 0.5 * robot.length, 0.5 * robot.width
-            self.footprint = pymunk.Poly(self.body, [(ahead + sx * half_length, sy * half_width)
-                                                     for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+            pieces = [pymunk.Poly(self.body, [(ahead + sx * half_length, sy * half_width)
+                                              for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))])]
+        else:  # pymunk collides convex shapes only
+            pieces = [pymunk.Poly(self.body, [tuple(v) for v in piece])
+                      for piece in convex_pieces(np.asarray(robot.vertices, dtype=float))]
+        self.footprint = pieces
         # A circle about the reference point is swept exactly; anything else pose by pose.
         self._swept_circle = robot.shape == "circle" and ahead == 0.0
         self._sweep_radius = robot.bounding_radius
-        self.footprint.filter = pymunk.ShapeFilter(categories=_ROBOT_CATEGORY)
+        for piece in pieces:
+            # One group: a concave footprint's convex pieces, which share edges, never touch each other.
+            piece.filter = pymunk.ShapeFilter(group=1, categories=_ROBOT_CATEGORY)
         self._not_robot = pymunk.ShapeFilter(mask=pymunk.ShapeFilter.ALL_MASKS() ^ _ROBOT_CATEGORY)
-        self.space.add(self.body, self.footprint)
+        self.space.add(self.body, *pieces)
 
     def overlaps(self, pose: Pose2D) -> bool:
         """Whether the robot's footprint at ``pose`` touches any obstacle or wall."""
@@ -250,7 +256,7 @@ class World:
         self.body.position = (pose[0], pose[1])
         self.body.angle = pose[2]
         self.space.reindex_shapes_for_body(self.body)
-        return {info.shape for info in self.space.shape_query(self.footprint)}
+        return {info.shape for piece in self.footprint for info in self.space.shape_query(piece)}
 
     def reset(self, seed: int | None = None) -> Readings:
         """Put the robot at the start, at rest, and the movers at theirs; reseed what draws if

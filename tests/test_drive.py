@@ -1,6 +1,7 @@
-"""The controlled robot's kinematics other than diff and its motion noise (common.drive): IR-SIM's
-omni, omni_angular and acker, in flatland step for step as IR-SIM moves them, in the gym env's
-action space, and refused with one line where only a differential drive will do."""
+"""The controlled robot's kinematics other than diff, its motion noise (common.drive) and its
+footprints: IR-SIM's omni, omni_angular and acker, cars and polygon robots, in flatland step for
+step as IR-SIM moves them, in the gym env's action space, and refused with one line where only a
+differential drive will do."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import numpy as np
 import pytest
 import yaml
 
-from common.drive import Drive
+from common.drive import CHANNELS, Drive
 from common.errors import ConfigError
 from common.scenario import RobotProfile, Scenario
 from tests.conftest import optional
@@ -27,6 +28,9 @@ ROBOTS = {
     "acker": {"kinematics": {"name": "acker"}, "shape": {"name": "rectangle", "length": 1.0, "width": 0.6,
                                                         "wheelbase": 0.7},
               "vel_max": [1.5, 0.5], "vel_min": [-1.0, -0.5], "acce": [3.0, 2.0]},
+    # A differential drive with a concave footprint (an arrowhead: pymunk collides its convex pieces).
+    "polygon": {"kinematics": {"name": "diff"}, "shape": {"name": "polygon", "vertices": [
+        [0.35, 0.0], [-0.2, 0.3], [-0.05, 0.0], [-0.2, -0.3]]}, "vel_min": [-1.0, -2.0], "vel_max": [1.5, 2.0]},
     # IR-SIM's motion noise, drawn from the world's generator in IR-SIM's order: equal draws.
     "diff_noisy": {"kinematics": {"name": "diff", "noise": True, "alpha": [0.1, 0.0, 0.02, 0.3]},
                    "shape": {"name": "circle", "radius": 0.3}, "vel_min": [-1.0, -1.5], "vel_max": [1.5, 1.5]},
@@ -72,7 +76,7 @@ def test_each_kinematics_moves_and_collides_as_irsim_does(name, tmp_path):
     try:
         world.reset()
         for seed in range(20):  # until a run of commands ends in a collision
-            for k, command in enumerate(_commands(len(world.drive.channels), seed)):
+            for k, command in enumerate(_commands(len(CHANNELS[world.scenario.robot.kinematics]), seed)):
                 ours = world.step(*command)
                 env.step(command.reshape(-1, 1))
                 theirs = np.asarray(env.get_robot_state()[:3, 0], dtype=float)

@@ -15,6 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from common.errors import ConfigError
 from common.irsim_geometry import circle_outline, rectangle_outline
 from common.kernel_cache import compiled_for
 from common.motion.rvo import rvo_velocity
@@ -76,6 +77,8 @@ class Movers:
         self._states = np.empty((self.count, 8))
         self._circle_rows, self._box_rows = np.empty((len(self._circles), 3)), np.empty((len(self._boxes), 6))
         robot = scenario.robot
+        if robot.shape == "polygon":
+            raise ConfigError(None, "robot.shape", "a polygon robot among movers is not modelled; allowed: circle, box")
         # The robot's body for contacts: shape, x, y, heading, radius, length, width, and how far
         # ahead of its pose the footprint's centre is.
         box = robot.shape == "box"
