@@ -155,7 +155,9 @@ def test_devices_symlinks_to_them_and_fifos_are_one_line_refusals_from_the_cli(c
     # Unbounded, each of these took gigabytes in seconds, or (a FIFO) waited for ever.
     stats, err = _in_process(_CLI, *words, timeout=20)
     _one_line(err, "a FIFO (named pipe), not a regular file" if "FIFO" in case else "a character device, not a regular file")
-    assert stats["code"] == 2 and stats["seconds"] < 5 and stats["peak_mb"] < 1500, stats
+    # The time includes what main imports on its way (the schema's torch: about 4 s on this machine,
+    # 5.4 s once under load against the old 5 s bound); an unbounded read never ends.
+    assert stats["code"] == 2 and stats["seconds"] < 12 and stats["peak_mb"] < 1500, stats
     assert not (tmp_path / "out").exists()
 
 
