@@ -112,7 +112,9 @@ SHAPE_KEYS = {
 }
 OBSTACLE_SHAPES = ("circle", "rectangle", "polygon", "linestring")
 ROBOT_SHAPES = ("circle", "rectangle", "polygon")  # the footprints RobotProfile can express
-DISTRIBUTION_KEYS = ("name", "range_low", "range_high", "min_distance", "radius", "center", "3d")
+# ``non_overlapping`` is accepted and, as IR-SIM's factory does, ignored (IR-SIM reads it only as an
+# argument of its env's random_obstacle_position, never from a file).
+DISTRIBUTION_KEYS = ("name", "range_low", "range_high", "min_distance", "radius", "center", "3d", "non_overlapping")
 # What one file may cost (IR-SIM has no caps): a shared file must be answered quickly, whatever it holds.
 MAX_OBJECTS = MAX_OBSTACLES + 1  # robots and obstacles, after ``number`` fan-out, across the file
 MAX_VERTICES = 1000  # per polygon

@@ -256,6 +256,9 @@ obstacle:
     assert np.all((xy >= [2, 3]) & (xy <= [8, 9]))
     gaps = np.hypot(*(xy[:, None] - xy[None]).transpose(2, 0, 1))[np.triu_indices(6, 1)]
     assert gaps.min() >= 1.5
+    # IR-SIM's factory ignores non_overlapping (its env's reset API reads it): the same layout.
+    ignored = text.replace("min_distance: 1.5}", "min_distance: 1.5, non_overlapping: true}")
+    assert "non_overlapping" in ignored and load(tmp_path, ignored, seed=4) == first
 
 
 def test_spacing_decisions_match_irsims_rule():
