@@ -65,6 +65,11 @@ def _absent(value: Any) -> bool:
 OMITTED_WHEN_ABSENT = Field(default=None, exclude_if=_absent)
 
 
+def omitted_at_default(default: Any) -> Any:
+    """A field left out of a dump while it holds ``default`` (as :data:`OMITTED_WHEN_ABSENT`)."""
+    return Field(default=default, exclude_if=lambda value: value == default)
+
+
 class CircleObstacle(Frozen):
     """A cylinder in 3D: centre (x, y), radius; a person, if it carries a ``motion``."""
 
@@ -191,28 +196,29 @@ class RobotProfile(Frozen):
     radius: Length = 0.2
     length: Length = 0.3
     width: Length = 0.2
-    vertices: Annotated[tuple[tuple[Coordinate, Coordinate], ...], Field(max_length=MAX_VERTICES)] | None = None
-    footprint_offset: Annotated[float, Field(ge=-MAX_LENGTH, le=MAX_LENGTH)] = 0.0
-    kinematics: Literal["diff", "omni", "omni_angular", "acker"] = "diff"
+    vertices: Annotated[tuple[tuple[Coordinate, Coordinate], ...], Field(max_length=MAX_VERTICES)] | None = \
+        OMITTED_WHEN_ABSENT
+    footprint_offset: Annotated[float, Field(ge=-MAX_LENGTH, le=MAX_LENGTH)] = omitted_at_default(0.0)
+    kinematics: Literal["diff", "omni", "omni_angular", "acker"] = omitted_at_default("diff")
     wheel_radius: Length = 0.05
     wheel_base: Length = 0.22
     v_min: Speed = 0.0
     v_max: PositiveSpeed = 1.0
     w_max: PositiveSpeed = 1.0
     w_min: Speed | None = None  # default -w_max
-    lateral_max: PositiveSpeed = 1.0
-    lateral_min: Speed | None = None  # default -lateral_max
-    steer_max: PositiveSpeed = 1.0
-    steer_min: Speed | None = None  # default -steer_max
-    steer_mode: Literal["steer", "angular"] = "steer"
-    axle_distance: Length = 1.0
+    lateral_max: PositiveSpeed = omitted_at_default(1.0)
+    lateral_min: Speed | None = OMITTED_WHEN_ABSENT  # default -lateral_max
+    steer_max: PositiveSpeed = omitted_at_default(1.0)
+    steer_min: Speed | None = OMITTED_WHEN_ABSENT  # default -steer_max
+    steer_mode: Literal["steer", "angular"] = omitted_at_default("steer")
+    axle_distance: Length = omitted_at_default(1.0)
     accel_v: Acceleration = math.inf
     accel_w: Acceleration = math.inf
-    accel_lateral: Acceleration = math.inf
-    accel_steer: Acceleration = math.inf
+    accel_lateral: Acceleration = omitted_at_default(math.inf)
+    accel_steer: Acceleration = omitted_at_default(math.inf)
     encoder_noise: Fraction = 0.0
-    motion_noise: tuple[Annotated[float, Field(ge=0.0, le=100.0)], ...] | None = None
-    static: bool = False
+    motion_noise: tuple[Annotated[float, Field(ge=0.0, le=100.0)], ...] | None = OMITTED_WHEN_ABSENT
+    static: bool = omitted_at_default(False)
 
     @model_validator(mode="after")
     def _limits_ordered(self) -> "RobotProfile":
