@@ -165,9 +165,14 @@ def scenario_to_irsim(scenario: Scenario) -> dict[str, Any]:
         x1, y1 = x0 + world.width, y0 + world.height
         ring = [[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]
         obstacles.append({"shape": {"name": "linestring", "vertices": ring}, "state": list(_ORIGIN)})
+    grid = scenario.grid_map
+    world_entry: dict[str, Any] = {"width": world.width, "height": world.height, "step_time": world.step_time,
+                                   "offset": list(world.offset), "collision_mode": world.collision_mode}
+    if grid is not None:
+        world_entry.update(obstacle_map=grid.image if grid.image is not None else dict(grid.generator),
+                           mdownsample=grid.downsample)
     return {
-        "world": {"width": world.width, "height": world.height, "step_time": world.step_time,
-                  "offset": list(world.offset), "collision_mode": world.collision_mode},
+        "world": world_entry,
         "robot": [robot_entry, *robots],
         "obstacle": obstacles,
     }

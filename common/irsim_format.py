@@ -43,6 +43,7 @@ from pydantic import ValidationError
 
 from common.drive import CHANNELS as DRIVE_CHANNELS, DEFAULT_NOISE, NOISE_SIZES
 from common.errors import ConfigError, quote
+from common.grid_maps import GridMap, occupancy, resolve_image
 from common.irsim_values import (
     Entry,
     Value,
@@ -209,12 +210,47 @@ def _world(value: Any, path: str) -> tuple[WorldSpec, str | None]:
                                      at("collision_mode"))
     string(world.get("step_mode", "internal"), at("step_mode"), ("internal", "external"))
     string(world.get("control_mode", "auto"), at("control_mode"), ("auto", "keyboard"))
-    if world.get("obstacle_map") is not None:
-        raise fail(at("obstacle_map"), "obstacle maps are not supported; allowed: null (use obstacle shapes)")
+    if world.get("mdownsample") is not None:
+        whole(world["mdownsample"], at("mdownsample"), 1, 64)
     name = world.get("name")
     if name is not None:
         string(name, at("name"))
     return build_model(WorldSpec, path, fields), name
+
+
+def _grid_map(value: Any, path: str, source: str | Path | None, world: WorldSpec) -> GridMap | None:
+    """IR-SIM's ``obstacle_map`` (an image path, or a generator spec mapping) and ``mdownsample``,
+    read now, so that a map that cannot be read is refused with the file."""
+    grid = _grid_source(value, path, source)
+    if grid is not None:
+        try:
+            occupancy(grid, world.width, world.height)
+        except ConfigError as exc:
+            raise fail(join(path, "obstacle_map"), exc.problem) from None
+    return grid
+
+
+def _grid_source(value: Any, path: str, source: str | Path | None) -> GridMap | None:
+    world = {} if value is None else value
+    item = world.get("obstacle_map")
+    if item is None:
+        return None
+    at = join(path, "obstacle_map")
+    downsample = whole(world.get("mdownsample", 1), join(path, "mdownsample"), 1, 64)
+    if isinstance(item, dict) and item.get("name") == "image":
+        item = item.get("path")
+    if isinstance(item, str):
+        folder = None if source is None else Path(source).resolve().parent
+        try:
+            return GridMap(image=resolve_image(item, folder), downsample=downsample)
+        except ConfigError as exc:
+            raise fail(at, exc.problem) from None
+    spec = mapping_of(item, at)
+    for key, entry in spec.items():
+        if not isinstance(entry, (str, int, float, bool)):
+            raise fail(join(at, str(key)), f"expected a number, a string or true/false (got {quote(entry)})")
+    string(spec.get("name"), join(at, "name"))
+    return GridMap(generator=tuple(sorted((str(k), v) for k, v in spec.items())), downsample=downsample)
 
 
 # -- objects: fan-out and placement --------------------------------------------------------------
@@ -680,6 +716,8 @@ def _parse(data: dict, source: str | Path | None, draws: _Draws) -> Scenario:
             raise fail(f"{prefix}{key}", f"unknown key; allowed: {', '.join(TOP_KEYS)}")
     reads = draws.reads
     world, name = reads.once("world", (data.get("world"),), lambda: _world(data.get("world"), f"{prefix}world"))
+    grid_map = reads.once("grid map", (data.get("world"),),
+                          lambda: _grid_map(data.get("world"), f"{prefix}world", source, world))
     obstacles: list[Any] = []
     robot = robot_motion = None
     for group, path in _groups(data.get("robot"), f"{prefix}robot"):
@@ -716,6 +754,7 @@ def _parse(data: dict, source: str | Path | None, draws: _Draws) -> Scenario:
         "seed": Value(draws.seed if reads.once("random", (data,), lambda: has_random_placement(data)) else None,
                       prefix or "world"),
         "robot_motion": Value(robot_motion, path),
+        "grid_map": Value(grid_map, f"{prefix}world.obstacle_map"),
     }
     return build_model(Scenario, prefix.rstrip("."), fields)
 

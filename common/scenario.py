@@ -38,6 +38,7 @@ from common.fields import (  # noqa: F401  (re-exported: the scenario's caps and
     Point,
     Speed,
 )
+from common.grid_maps import GridMap, occupancy
 from common.kinematics import Pose2D
 from common.motion.spec import Motion
 from common.polygons import is_simple_polygon
@@ -355,9 +356,10 @@ class Scenario(Frozen):
     Obstacles with a ``motion`` move (:mod:`common.motion`); their pose is where they start.
     ``robot_motion`` is the controlled robot's own IR-SIM behaviour, read from an IR-SIM file: the
     robot follows its commands, but IR-SIM still counts it in its group's plan and draws its
-    wandering goals, so flatland keeps both to stay IR-SIM's.
+    wandering goals, so flatland keeps both to stay IR-SIM's. ``grid_map`` is an occupancy grid
+    over the world (:mod:`common.grid_maps`, IR-SIM's ``obstacle_map``; flatland only), an
+    obstacle besides the others.
     """
-
 
     name: str = "scenario"
     world: WorldSpec = WorldSpec()
@@ -371,6 +373,7 @@ class Scenario(Frozen):
     difficulty: Fraction = 0.0
     seed: int | None = None
     robot_motion: Motion | None = OMITTED_WHEN_ABSENT
+    grid_map: GridMap | None = OMITTED_WHEN_ABSENT
 
     @model_validator(mode="after")
     def _movers_fit_the_world(self) -> "Scenario":
@@ -495,6 +498,16 @@ def scenario_from_mapping(data: dict, source: str | Path | None = None) -> Scena
         scenario = Scenario.model_validate(data)
     except ValidationError as exc:
         raise pydantic_error(source, exc) from None
+    grid = scenario.grid_map
+    if grid is not None:
+        if grid.image is not None and source is not None and not Path(grid.image).is_absolute():
+            # A map image beside the scenario file, wherever it is read from.
+            grid = grid.model_copy(update={"image": str(Path(source).resolve().parent / grid.image)})
+            scenario = scenario.model_copy(update={"grid_map": grid})
+        try:
+            occupancy(grid, scenario.world.width, scenario.world.height)
+        except (ConfigError, OSError) as exc:
+            raise ConfigError(source, "grid_map", getattr(exc, "problem", None) or f"cannot read the map: {exc}") from None
     return scenario.check(source)
 
 

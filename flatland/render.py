@@ -18,6 +18,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 
+from common.grid_maps import occupancy
 from common.readings import Readings
 from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, SegmentObstacle
 
@@ -94,6 +95,11 @@ class Renderer:
         ax.set_ylabel("y [m]")
         if world.walls:
             ax.add_patch(patches.Rectangle((x0, y0), world.width, world.height, fill=False, edgecolor="black", linewidth=2))
+        if self.scenario.grid_map is not None:
+            occupied = occupancy(self.scenario.grid_map, world.width, world.height)
+            # Indexed [x, y]: transposed to rows of y, drawn from the bottom (origin "lower").
+            ax.imshow(occupied.T, origin="lower", extent=(x0, x0 + world.width, y0, y0 + world.height),
+                      cmap="Greys", vmin=0, vmax=1.25, interpolation="nearest")
         for obstacle in self.scenario.static_obstacles:
             patch = _obstacle_patch(obstacle)
             if patch is not None:

@@ -27,6 +27,7 @@ from common.motion.movers import Movers, mover_generator
 from flatland.polygons import convex_pieces
 from common.readings import Contact, Imu, Odometry, Readings, frozen, mover_fault
 from common.geometry import box_corner_table
+from common.grid_maps import boundary_cells
 from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, SegmentObstacle, WorldSpec
 from flatland.clearance import path_clear, swept_capsule
 from flatland.free_step import free_step, step_constants
@@ -200,6 +201,12 @@ class World:
             else:
                 self._pieces.extend(pymunk.Segment(static, tuple(a), tuple(b), 0.0) for a, b in zip(ring[:-1], ring[1:]))
         circle_table, box_table = np.array(circles).reshape(-1, 3), np.array(boxes).reshape(-1, 6)
+        if scenario.grid_map is not None:
+            # The map's cells that free space meets, as boxes: all a beam or a footprint can reach.
+            world = scenario.world
+            cells = boundary_cells(scenario.grid_map, world.width, world.height, world.offset)
+            box_table = np.vstack([box_table, np.column_stack([cells[:, :2], np.ones(len(cells)), np.zeros(len(cells)),
+                                                               0.5 * cells[:, 2:]])])
         self._use(self._circles, circles, _reshape_circle, lambda row: pymunk.Circle(static, row[2], row[:2]))
         # All corners in one compiled call: per box in Python they cost more than the reshape.
         self._use(self._boxes, box_corner_table(box_table).tolist(), pymunk.Poly.unsafe_set_vertices,

@@ -68,6 +68,7 @@ def test_bench_json_has_the_agreed_keys(capsys, monkeypatch, tmp_path):
     for kind in ("open", "sparse", "cluttered", "warehouse", "trap", "irsim_random"):
         assert results[f"reset_ms_{kind}"] > 0
     assert results["circles_flatland_steps_per_s"] > 0 and "circles_flatland_vs_irsim" in results
+    assert results["grid_flatland_steps_per_s"] > 0 and results["grid_flatland_vs_irsim"] > 0
     assert results["warehouse_env_steps_per_s"] > 0 and results["ppo_steps_per_s_cluttered"] > 0
     assert 0 < results["ppo_rollout_share_sparse"] < 1
     assert results["ppo_steps_per_s_cluttered_subproc"] > 0 and results["ppo_subproc_vs_dummy"] > 0

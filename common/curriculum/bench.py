@@ -131,18 +131,42 @@ CIRCLE_WORLD = {
 """IR-SIM's typical world: 31 random circles of 0.2 m and a 36-beam 360° lidar (as its examples)."""
 
 
+GRID_WORLD = {
+    "world": {"width": 20, "height": 20, "step_time": 0.1,
+              "obstacle_map": {"name": "perlin", "resolution": 0.1, "complexity": 0.12, "fill": 0.32, "fractal": 1,
+                               "attenuation": 0.5, "seed": 48}},
+    "robot": {**CIRCLE_WORLD["robot"], "shape": {"name": "circle", "radius": 0.1}, "state": [5.3, 5.5, 0],
+              "goal": [15.5, 17.9, 0]},
+}
+"""IR-SIM's Perlin grid-map example (``10grid_map/grid_map_perlin.yaml``: 200 x 200 cells of 0.1 m),
+with the circle world's robot limits and lidar."""
+
+
+def irsim_grid_world_figures(steps: int) -> dict[str, Any]:
+    """Flatland against IR-SIM on IR-SIM's Perlin grid map (IR-SIM's generator builds it for both:
+    without IR-SIM there is no figure)."""
+    if _import_irsim() is None:
+        return {"grid_flatland_steps_per_s": None, "grid_irsim_steps_per_s": None, "grid_flatland_vs_irsim": None}
+    return _irsim_file_figures("grid", GRID_WORLD, steps)
+
+
 def irsim_circle_world_figures(steps: int) -> dict[str, Any]:
     """Flatland against IR-SIM on an IR-SIM world file of circles, both resetting as episodes end."""
+    return _irsim_file_figures("circles", CIRCLE_WORLD, steps)
+
+
+def _irsim_file_figures(key: str, data: dict, steps: int) -> dict[str, Any]:
+    """Flatland's and IR-SIM's steps per second on the IR-SIM world file ``data``, and their ratio."""
     from common.world_file import WorldFile
 
     with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "circles.yaml"
-        path.write_text(yaml.safe_dump(CIRCLE_WORLD))
+        path = Path(tmp) / f"{key}.yaml"
+        path.write_text(yaml.safe_dump(data))
         flat = flatland_steps_per_s(path, steps)
         theirs = irsim_steps_per_s(path, robot=WorldFile(path).initial.robot, steps=max(500, steps // 10))
-    return {"circles_flatland_steps_per_s": round(flat, 1),
-            "circles_irsim_steps_per_s": None if theirs is None else round(theirs, 1),
-            "circles_flatland_vs_irsim": None if theirs is None else round(flat / theirs, 1)}
+    return {f"{key}_flatland_steps_per_s": round(flat, 1),
+            f"{key}_irsim_steps_per_s": None if theirs is None else round(theirs, 1),
+            f"{key}_flatland_vs_irsim": None if theirs is None else round(flat / theirs, 1)}
 
 
 def ppo_steps_per_s(kind: str, steps: int = 16_384, seed: int = 0, vec_env: str = "dummy") -> tuple[float, float]:
@@ -441,6 +465,7 @@ def run_benchmarks(steps: int = 20_000) -> dict[str, Any]:
         "camera_fps": round(camera_fps(scenario3d), 1),
         **reset_ms(),
         **irsim_circle_world_figures(steps),
+        **irsim_grid_world_figures(steps),
         "warehouse_env_steps_per_s": round(flatland_steps_per_s("warehouse", max(500, steps // 4)), 1),
         **movers_figures(max(1000, steps // 4)),
         **movers3d_figures(max(250, steps // 40)),

@@ -1,0 +1,130 @@
+"""Occupancy grid maps (IR-SIM's ``obstacle_map``): read as IR-SIM reads an image or a generator
+spec, seen and collided with in flatland as in IR-SIM, known to the planners' ground truth, and
+refused in one line where they cannot be built."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import yaml
+from PIL import Image
+
+from common.errors import ConfigError
+from common.grid_maps import GridMap, boundary_cells, occupancy
+from common.occupancy import scenario_grid
+from common.scenario import Scenario
+from tests.conftest import optional
+
+
+def _image(tmp_path, pixels: np.ndarray, name: str = "map.png") -> str:
+    path = tmp_path / name
+    Image.fromarray(pixels.astype(np.uint8)).save(path)
+    return str(path)
+
+
+def test_an_image_is_read_with_its_top_row_at_the_top_of_the_world(tmp_path):
+    pixels = np.full((2, 4), 255)  # 2 rows, 4 columns, white
+    pixels[0, 0] = 0  # black: the top-left pixel
+    grid = GridMap(image=_image(tmp_path, pixels))
+    occupied = occupancy(grid, 8.0, 4.0)
+    assert occupied.shape == (4, 2) and occupied.sum() == 1 and occupied[0, 1]  # x index 0, the upper row
+    # On an 8 m x 4 m world every cell is 2 m square; the cell's centre is (1, 3).
+    assert boundary_cells(grid, 8.0, 4.0, (0.0, 0.0)).tolist() == [[1.0, 3.0, 2.0, 2.0]]
+    assert boundary_cells(grid, 8.0, 4.0, (10.0, 20.0))[0, :2].tolist() == [11.0, 23.0]
+
+
+def test_only_the_cells_free_space_meets_become_boxes(tmp_path):
+    pixels = np.full((5, 5), 255)
+    pixels[1:4, 1:4] = 0  # a 3 x 3 block: its centre cell is enclosed
+    cells = boundary_cells(GridMap(image=_image(tmp_path, pixels)), 5.0, 5.0, (0.0, 0.0))
+    assert len(cells) == 8 and [2.5, 2.5] not in cells[:, :2].tolist()
+
+
+def test_the_planners_ground_truth_holds_the_map(tmp_path):
+    pixels = np.full((10, 10), 255)
+    pixels[:, 5] = 0  # a wall across the world at x = 5..6
+    scenario = Scenario(grid_map=GridMap(image=_image(tmp_path, pixels)), start=(1.0, 5.0, 0.0), goal=(9.0, 5.0))
+    grid = scenario_grid(scenario, resolution=0.1, inflation=0.0)
+    row = grid.occupied[50]
+    assert row[52] and row[57] and not row[45] and not row[65]
+
+
+def test_a_scenario_file_takes_a_map_image_beside_it(tmp_path):
+    from common.scenario import load_scenario
+
+    pixels = np.full((10, 10), 255)
+    pixels[:, 5] = 0
+    _image(tmp_path, pixels, "wall.png")
+    (tmp_path / "scenario.yaml").write_text("grid_map: {image: wall.png}\nstart: [1, 5, 0]\ngoal: [9, 5]\n")
+    scenario = load_scenario(tmp_path / "scenario.yaml")
+    assert occupancy(scenario.grid_map, 10.0, 10.0)[5].all()
+    (tmp_path / "bad.yaml").write_text("grid_map: {image: gone.png}\n")
+    with pytest.raises(ConfigError, match=r"bad\.yaml: grid_map: cannot read the map"):
+        load_scenario(tmp_path / "bad.yaml")
+    (tmp_path / "both.yaml").write_text("grid_map: {}\n")
+    with pytest.raises(ConfigError, match=r"both\.yaml: grid_map: a grid map comes from an image or a generator"):
+        load_scenario(tmp_path / "both.yaml")
+
+
+def _world_file(tmp_path, obstacle_map, **world) -> str:
+    data = {"world": {"width": 50, "height": 50, "obstacle_map": obstacle_map, **world},
+            "robot": [{"kinematics": {"name": "diff"}, "shape": {"name": "circle", "radius": 0.5},
+                       "state": [8, 8, 0.5], "goal": [40, 40, 0], "vel_max": [3, 1.5],
+                       "sensors": [{"name": "lidar2d", "range_max": 12, "angle_range": 2 * math.pi, "number": 120}]}]}
+    path = tmp_path / "map.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return str(path)
+
+
+@pytest.mark.parametrize("obstacle_map, world", [
+    ("cave.png", {"mdownsample": 2}),  # IR-SIM's own cave, found among its maps
+    ({"name": "perlin", "resolution": 0.25, "complexity": 0.1, "fill": 0.3, "fractal": 1, "attenuation": 0.5,
+      "seed": 5}, {}),
+], ids=["image", "perlin"])
+def test_a_grid_map_is_seen_and_collided_with_as_irsim_does(obstacle_map, world, tmp_path):
+    irsim = optional("irsim")
+    import flatland
+
+    path = _world_file(tmp_path, obstacle_map, **world)
+    ours = flatland.load_world(path, seed=0)
+    env = irsim.make(path, display=False, log_level="ERROR", seed=0)
+    rng = np.random.default_rng(3)
+    collided = -1
+    try:
+        ours.reset()
+        for k in range(400):
+            command = (rng.uniform(0.5, 3.0), rng.uniform(-1.5, 1.5))
+            readings = ours.step(*command)
+            env.step(np.array(command).reshape(2, 1))
+            pose = np.asarray(env.get_robot_state()[:3, 0], dtype=float)
+            np.testing.assert_allclose(readings.pose[:2], pose[:2], rtol=0, atol=1e-9, err_msg=f"step {k}")
+            close = np.abs(readings.lidar - env.get_lidar_scan()["ranges"]) <= 0.02
+            assert close.mean() >= 0.95, f"step {k}: {close.mean():.0%} of beams within 2 cm"
+            assert readings.collided == bool(env.robot.collision_flag), f"collision flag, step {k}"
+            if readings.collided:
+                collided = k
+                break
+    finally:
+        env.end(0)
+    assert collided >= 0, "the drive never met the map: its contact was not compared"
+
+
+def test_grid_maps_are_refused_in_one_line_where_they_cannot_be_read_or_built(tmp_path):
+    from common.world_file import read_world_file
+    from physics3d.world import World
+
+    with pytest.raises(ConfigError, match=r"world\.obstacle_map: image 'nowhere\.png' not found"):
+        read_world_file(_world_file(tmp_path, "nowhere.png"))
+    huge = _image(tmp_path, np.zeros((4100, 4100)), "huge.png")
+    with pytest.raises(ConfigError, match=r"world\.obstacle_map: 4100 x 4100 pixels; allowed: at most"):
+        read_world_file(_world_file(tmp_path, huge))
+    with pytest.raises(ConfigError, match=r"world\.obstacle_map\.name: expected a string \(got 3\)"):
+        read_world_file(_world_file(tmp_path, {"name": 3}))
+    optional("irsim")  # its generators, and their own refusal
+    with pytest.raises(ConfigError, match=r"world\.obstacle_map: Unknown or missing grid_generator name: 'maze'"):
+        read_world_file(_world_file(tmp_path, {"name": "maze", "resolution": 0.1}))
+    scenario = Scenario(grid_map=GridMap(image=_image(tmp_path, np.full((4, 4), 255))))
+    with pytest.raises(ConfigError, match="grid_map: an occupancy grid map is not built in the 3D tier"):
+        World(scenario)
