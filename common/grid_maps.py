@@ -7,9 +7,10 @@ so a cell is width / columns by height / rows; a cell above ``threshold`` (IR-SI
 obstacle. A generator spec (IR-SIM's ``perlin``, its ``resolution`` in m per cell) is built by
 IR-SIM's own generator, so it needs the ``irsim`` extra.
 
-A tier meets a grid through :func:`boundary_cells`: the occupied cells with a free neighbour, as
-boxes. A ray or a footprint coming from free space enters the occupied region through one of them,
-so a lidar and a contact see what IR-SIM's map (the boundary of the union of occupied cells) shows.
+Flatland's lidar walks the grid of :func:`occupancy` cell by cell; its contacts meet
+:func:`boundary_cells`, the occupied cells with a free neighbour, as boxes: a footprint coming
+from free space enters the occupied region through one of them. Both see what IR-SIM's map (the
+boundary of the union of occupied cells) shows.
 """
 
 from __future__ import annotations

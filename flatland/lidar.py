@@ -138,6 +138,42 @@ def _cast(ox, oy, a0, delta, circles, boxes, segments, range_max, dirs, out):
                     out[k] = t
 
 
+@kernel
+def cast_grid(ox, oy, a0, delta, occupied, x0, y0, cell_x, cell_y, out):
+    """Shorten ``out`` (beams at world angles a0 + k * delta from (ox, oy)) to where each beam first
+    enters an occupied cell of ``occupied`` (indexed [i, j]: the cell from x0 + i cell_x, y0 + j
+    cell_y), walking only the cells it crosses (Amanatides and Woo); from inside an occupied cell
+    a beam reads where it leaves that cell, as from inside a box."""
+    nx, ny = occupied.shape
+    for k in range(out.shape[0]):
+        dx, dy = math.cos(a0 + k * delta), math.sin(a0 + k * delta)
+        i, j = int(math.floor((ox - x0) / cell_x)), int(math.floor((oy - y0) / cell_y))
+        step_i, step_j = (1 if dx > 0.0 else -1), (1 if dy > 0.0 else -1)
+        next_x = x0 + (i + (1 if dx > 0.0 else 0)) * cell_x  # the cell's edge the beam leaves by in x
+        next_y = y0 + (j + (1 if dy > 0.0 else 0)) * cell_y
+        t_x = (next_x - ox) / dx if dx != 0.0 else math.inf
+        t_y = (next_y - oy) / dy if dy != 0.0 else math.inf
+        delta_x = cell_x / abs(dx) if dx != 0.0 else math.inf
+        delta_y = cell_y / abs(dy) if dy != 0.0 else math.inf
+        if 0 <= i < nx and 0 <= j < ny and occupied[i, j]:
+            leave = min(t_x, t_y)
+            if _EPS < leave < out[k]:
+                out[k] = leave
+            continue
+        while True:
+            if t_x < t_y:
+                i, t, t_x = i + step_i, t_x, t_x + delta_x
+            else:
+                j, t, t_y = j + step_j, t_y, t_y + delta_y
+            if t >= out[k] or (i < 0 and step_i < 0) or (i >= nx and step_i > 0) or (j < 0 and step_j < 0) \
+                    or (j >= ny and step_j > 0):
+                break
+            if 0 <= i < nx and 0 <= j < ny and occupied[i, j]:
+                if t > _EPS:
+                    out[k] = t
+                break
+
+
 class Lidar:
     """A lidar mounted on the robot, scanning a fixed set of primitives.
 
@@ -154,6 +190,7 @@ class Lidar:
         self.spec = spec
         self._limited = spec.noise_std > 0.0 or spec.range_min > 0.0  # whether finish() has anything to do
         self.place(circles, boxes, segments)
+        self.grid: tuple | None = None  # (occupied cells, x0, y0, cell width, cell height): cast_grid's
         self.rng = rng
         angles = spec.beam_angles()
         self.first_beam = float(angles[0]) + spec.offset[2]  # in the robot frame, mounting yaw included
@@ -182,15 +219,10 @@ class Lidar:
         else:
             cast_scan_among(ox, oy, yaw + self.first_beam, self.beam_step, self.circles, self.boxes, self.segments,
                             circles, boxes, self.spec.range_max, ranges)
+        if self.grid is not None:
+            cast_grid(ox, oy, yaw + self.first_beam, self.beam_step, *self.grid, ranges)
         return self.finish(ranges)
 
     def finish(self, ranges: np.ndarray) -> np.ndarray:
         """What the sensor makes of exact ranges (``cast_scan``'s): :func:`~common.readings.sensed_ranges`."""
         return sensed_ranges(ranges, self.spec, self.rng) if self._limited else ranges
-        if spec.noise_std > 0.0:
-            # Only returns carry noise; a beam that hit nothing keeps reading range_max (IR-SIM does the same).
-            hits = ranges < spec.range_max
-            ranges[hits] += self.rng.normal(0.0, spec.noise_std, int(hits.sum()))
-            np.minimum(ranges, spec.range_max, out=ranges)
-        np.maximum(ranges, spec.range_min, out=ranges)  # a floor, or noise that may dip below 0
-        return ranges

@@ -27,7 +27,7 @@ from common.motion.movers import Movers, mover_generator
 from flatland.polygons import convex_pieces
 from common.readings import Contact, Imu, Odometry, Readings, frozen, mover_fault
 from common.geometry import box_corner_table
-from common.grid_maps import boundary_cells
+from common.grid_maps import boundary_cells, occupancy
 from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, SegmentObstacle, WorldSpec
 from flatland.clearance import path_clear, swept_capsule
 from flatland.free_step import free_step, step_constants
@@ -97,14 +97,16 @@ class World:
         self._pieces: list[pymunk.Shape] = []
         self._wall_edges = self._add_walls(scenario.world)
         self.lidar = Lidar(scenario.lidar, *self._add_obstacles(scenario), rng=self.rng)
+        self.lidar.grid = self._grid
         self._build_robot(scenario)
         self._integrate = INTEGRATORS[scenario.world.integrator]
         self.odometry = WheelOdometry(robot.wheel_radius, robot.wheel_base, robot.encoder_noise, self.rng, self._integrate)
         self.drive = None if robot.kinematics == "diff" and robot.motion_noise is None else \
             Drive(robot, scenario.world.step_time)
         # Encoder noise is drawn before the scan's: with it, the whole step stays in Python to keep
-        # that order. The compiled step moves a differential drive only.
-        self._compiled = robot.encoder_noise == 0.0 and self.drive is None
+        # that order. The compiled step moves a differential drive only, among shapes (not a map).
+        self._compilable = robot.encoder_noise == 0.0 and self.drive is None
+        self._compiled = self._compilable and self._grid is None
         # A step's path is an arc only under the exact integrator; the other models step by Euler.
         self._curved = scenario.world.integrator == "exact" and self.drive is None
         self._constants = step_constants(
@@ -153,6 +155,8 @@ class World:
             return False
         self.scenario = scenario
         self.lidar.place(*self._add_obstacles(scenario))
+        self.lidar.grid = self._grid
+        self._compiled = self._compilable and self._grid is None
         self._use_movers(scenario)
         self.pose = scenario.start_pose
         return True
@@ -201,15 +205,20 @@ class World:
             else:
                 self._pieces.extend(pymunk.Segment(static, tuple(a), tuple(b), 0.0) for a, b in zip(ring[:-1], ring[1:]))
         circle_table, box_table = np.array(circles).reshape(-1, 3), np.array(boxes).reshape(-1, 6)
+        self._grid, self._clear_boxes = None, box_table  # what path_clear tests a move against
+        solid_boxes = box_table
         if scenario.grid_map is not None:
-            # The map's cells that free space meets, as boxes: all a beam or a footprint can reach.
+            # The lidar walks the map's cells (flatland.lidar.cast_grid); contacts meet the cells
+            # free space touches, as boxes: all a footprint coming from free space can reach.
             world = scenario.world
+            occupied = occupancy(scenario.grid_map, world.width, world.height)
+            self._grid = (occupied, *world.offset, world.width / occupied.shape[0], world.height / occupied.shape[1])
             cells = boundary_cells(scenario.grid_map, world.width, world.height, world.offset)
-            box_table = np.vstack([box_table, np.column_stack([cells[:, :2], np.ones(len(cells)), np.zeros(len(cells)),
-                                                               0.5 * cells[:, 2:]])])
+            cell_boxes = np.column_stack([cells[:, :2], np.ones(len(cells)), np.zeros(len(cells)), 0.5 * cells[:, 2:]])
+            solid_boxes = self._clear_boxes = np.vstack([box_table, cell_boxes])
         self._use(self._circles, circles, _reshape_circle, lambda row: pymunk.Circle(static, row[2], row[:2]))
         # All corners in one compiled call: per box in Python they cost more than the reshape.
-        self._use(self._boxes, box_corner_table(box_table).tolist(), pymunk.Poly.unsafe_set_vertices,
+        self._use(self._boxes, box_corner_table(solid_boxes).tolist(), pymunk.Poly.unsafe_set_vertices,
                   lambda corners: pymunk.Poly(static, corners))
         if self._pieces:
             self.space.add(*self._pieces)
@@ -393,7 +402,7 @@ class World:
         # which costs more than the rest of a move.
         lidar = self.lidar
         capsule = swept_capsule(self._sweep_radius, speed, w, self._dt)
-        if test_clear and path_clear(start[0], start[1], end[0], end[1], capsule, lidar.circles, lidar.boxes,
+        if test_clear and path_clear(start[0], start[1], end[0], end[1], capsule, lidar.circles, self._clear_boxes,
                                      lidar.segments, self._solids):
             return end, False
         # Something is near the path. (Space.segment_query with a radius is no substitute for what

@@ -79,6 +79,9 @@ class Movers:
         robot = scenario.robot
         if robot.shape == "polygon":
             raise ConfigError(None, "robot.shape", "a polygon robot among movers is not modelled; allowed: circle, box")
+        if scenario.grid_map is not None:
+            raise ConfigError(None, "grid_map", "movers on a grid map are not modelled (they would not see it); "
+                              "allowed: a grid map without movers, or movers among shapes")
         # The robot's body for contacts: shape, x, y, heading, radius, length, width, and how far
         # ahead of its pose the footprint's centre is.
         box = robot.shape == "box"
