@@ -18,12 +18,13 @@ import numpy as np
 from common.errors import ConfigError, quote
 from common import moving_kinds
 from common.layouts import CIRCLE_ANY, CIRCLE_NEAR, CRATE, MIXED_ANY, MIXED_NEAR, PILLAR, SHELF, Layout, Step, lay_out
+from common.grid_maps import GridMap, maze_rooms
 from common.occupancy import goal_reachable, path_exists, shapes_grid
 from common.placement import CIRCLE
 from common.scenario import BoxObstacle, CircleObstacle, Obstacle, Scenario
 
 Split = Literal["train", "eval"]
-KINDS = ("open", "sparse", "cluttered", "warehouse", "trap", "crowd", "warehouse_moving")
+KINDS = ("open", "sparse", "cluttered", "warehouse", "trap", "crowd", "warehouse_moving", "maze")
 MOVING_KINDS = ("crowd", "warehouse_moving")
 _SPLIT_IDS = {"train": 0, "eval": 1}
 _MAX_ATTEMPTS = 200
@@ -115,16 +116,39 @@ def _trap(template: Scenario, rng: np.random.Generator, difficulty: float) -> tu
     return _checked(template, (float(start[0]), float(start[1]), float(start[2])), goal, obstacles)
 
 
+MAZE_RESOLUTION = 0.1  # m per cell of a maze's grid
+
+
+def _maze(template: Scenario, rng: np.random.Generator, difficulty: float) -> tuple | None:
+    """A maze on a grid map (:func:`common.grid_maps.maze_occupancy`): passages four robot radii
+    wide (at least 1 m), fewer shortcuts the harder, the start and goal in rooms at least half the
+    world's diagonal apart."""
+    world = template.world
+    passage = max(1.0, 4.0 * template.robot.bounding_radius)
+    grid = GridMap(generator=(("loops", round(0.3 * (1.0 - difficulty), 6)), ("name", "maze"), ("passage", passage),
+                              ("resolution", MAZE_RESOLUTION), ("seed", int(rng.integers(2**31 - 1)))))
+    rooms = maze_rooms(world.width, world.height, MAZE_RESOLUTION, passage, world.offset)
+    first, second = rng.choice(len(rooms), 2, replace=False)
+    start, goal = rooms[first], rooms[second]
+    if math.dist(start, goal) < 0.5 * world.diagonal:
+        return None
+    start_pose = (float(start[0]), float(start[1]), float(rng.uniform(-math.pi, math.pi)))
+    scenario = template.model_copy(update=dict(start=start_pose, goal=(float(goal[0]), float(goal[1])), obstacles=[],
+                                               grid_map=grid))
+    return (start_pose, tuple(goal), [], {"grid_map": grid}) if goal_reachable(scenario) else None
+
+
 def _checked(template: Scenario, start: tuple, goal: tuple, obstacles: list[Obstacle]) -> tuple | None:
     """The layout if its start and goal are clear of the obstacles and the goal is reachable, else None."""
     scenario = template.model_copy(update=dict(start=start, goal=goal, obstacles=obstacles))
     return (start, goal, obstacles) if _valid(scenario) and goal_reachable(scenario) else None
 
 
-# Each returns (start, goal, obstacles) already checked (clear and reachable), or None to redraw.
+# Each returns (start, goal, obstacles) already checked (clear and reachable), and any other field
+# of the scenario it sets (a maze's grid map), or None to redraw.
 _GENERATORS: dict[str, Callable[..., tuple | None]] = {
     "open": _open, "sparse": _sparse, "cluttered": _cluttered, "warehouse": _warehouse, "trap": _trap,
-    "crowd": moving_kinds.crowd, "warehouse_moving": moving_kinds.warehouse_moving,
+    "crowd": moving_kinds.crowd, "warehouse_moving": moving_kinds.warehouse_moving, "maze": _maze,
 }
 OPTIONS = ("reacting", "behavior")  # what a moving kind's variants may set
 
@@ -156,10 +180,11 @@ def generate(kind: str, seed: int, difficulty: float = 0.5, split: Split = "trai
         layout = _GENERATORS[kind](template, rng, difficulty, **options)
         if layout is None:
             continue
-        start, goal, obstacles = layout
+        start, goal, obstacles, *fields = layout
         scenario = template.model_copy(update=dict(
             name=f"{kind}-{split}-{seed}", kind=kind, difficulty=difficulty, seed=seed,
-            start=tuple(float(v) for v in start), goal=(float(goal[0]), float(goal[1])), obstacles=obstacles))
+            start=tuple(float(v) for v in start), goal=(float(goal[0]), float(goal[1])), obstacles=obstacles,
+            **(fields[0] if fields else {})))
         return scenario
     world = template.world
     raise ConfigError(None, "robot", f"no reachable {kind} layout in {_MAX_ATTEMPTS} attempts (seed {seed}) for a robot "

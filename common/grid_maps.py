@@ -4,13 +4,13 @@ of cells over the world rectangle, read as IR-SIM reads it.
 An image's grey level becomes an occupancy of 100 (black) to 0 (white), its rows the y axis from
 the top (IR-SIM's ``fliplr(grid.T)``), every ``downsample``-th cell kept; the grid spans the world,
 so a cell is width / columns by height / rows; a cell above ``threshold`` (IR-SIM's 50) is an
-obstacle. A generator spec (IR-SIM's ``perlin``, its ``resolution`` in m per cell) is built by
-IR-SIM's own generator, so it needs the ``irsim`` extra.
+obstacle. A generator spec is this project's ``maze`` (:func:`maze_occupancy`) or IR-SIM's
+(``perlin``, its ``resolution`` in m per cell), built by IR-SIM's own generator, so it needs the
+``irsim`` extra.
 
-Flatland's lidar walks the grid of :func:`occupancy` cell by cell; its contacts meet
-:func:`boundary_cells`, the occupied cells with a free neighbour, as boxes: a footprint coming
-from free space enters the occupied region through one of them. Both see what IR-SIM's map (the
-boundary of the union of occupied cells) shows.
+Flatland's lidar walks the grid of :func:`occupancy` cell by cell; its contacts meet the occupied
+cells merged into boxes (:func:`occupied_boxes`), whose union is theirs. Both see what IR-SIM's
+map (the boundary of the union of occupied cells) shows.
 """
 
 from __future__ import annotations
@@ -64,7 +64,77 @@ def _image_occupancy(path: str) -> np.ndarray:
     return np.fliplr((100 * (1 - grid.astype(np.float64))).T)
 
 
+def maze_occupancy(seed: int, width: float, height: float, resolution: float, passage: float,
+                   loops: float) -> np.ndarray:
+    """A maze drawn from ``seed`` (0-100 occupancy, indexed [x, y]): rooms ``passage`` m wide on a
+    lattice, walls one cell thick between them, a spanning tree of doors carved by a randomised
+    depth-first walk (every room reachable from every other), then a ``loops`` fraction of the
+    remaining walls between rooms opened, so that there are other ways round."""
+    rng = np.random.default_rng(seed)
+    nx, ny = max(1, round(width / resolution)), max(1, round(height / resolution))
+    pitch = max(2, round(passage / resolution)) + 1  # a room's cells and one wall
+    rooms_x, rooms_y = max(1, (nx - 1) // pitch), max(1, (ny - 1) // pitch)
+    occupied = np.ones((nx, ny), dtype=bool)
+    for a in range(rooms_x):
+        for b in range(rooms_y):
+            occupied[1 + a * pitch:(a + 1) * pitch, 1 + b * pitch:(b + 1) * pitch] = False
+
+    def open_between(a: int, b: int, c: int, d: int) -> None:
+        if a == c:  # the wall above or below: a horizontal run of cells
+            wall = max(b, d) * pitch
+            occupied[1 + a * pitch:(a + 1) * pitch, wall] = False
+        else:
+            wall = max(a, c) * pitch
+            occupied[wall, 1 + b * pitch:(b + 1) * pitch] = False
+
+    seen = np.zeros((rooms_x, rooms_y), dtype=bool)
+    stack, seen[0, 0] = [(0, 0)], True
+    closed = []
+    while stack:
+        a, b = stack[-1]
+        unseen = [(c, d) for c, d in ((a - 1, b), (a + 1, b), (a, b - 1), (a, b + 1))
+                  if 0 <= c < rooms_x and 0 <= d < rooms_y and not seen[c, d]]
+        if not unseen:
+            stack.pop()
+            continue
+        c, d = unseen[rng.integers(len(unseen))]
+        open_between(a, b, c, d)
+        seen[c, d] = True
+        stack.append((c, d))
+    for a in range(rooms_x):
+        for b in range(rooms_y):
+            for c, d in ((a + 1, b), (a, b + 1)):
+                if c < rooms_x and d < rooms_y:
+                    closed.append((a, b, c, d))
+    for a, b, c, d in closed:
+        if rng.random() < loops:
+            open_between(a, b, c, d)
+    return np.where(occupied, 100.0, 0.0)
+
+
+def maze_rooms(width: float, height: float, resolution: float, passage: float,
+               offset: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
+    """The centres (x, y) of the rooms of :func:`maze_occupancy`'s lattice."""
+    nx, ny = max(1, round(width / resolution)), max(1, round(height / resolution))
+    pitch = max(2, round(passage / resolution)) + 1
+    rooms_x, rooms_y = max(1, (nx - 1) // pitch), max(1, (ny - 1) // pitch)
+    a, b = np.meshgrid(np.arange(rooms_x), np.arange(rooms_y), indexing="ij")
+    middle = 1 + 0.5 * (pitch - 1)  # cells from a room's wall to its centre
+    return np.column_stack([offset[0] + (a.ravel() * pitch + middle) * resolution,
+                            offset[1] + (b.ravel() * pitch + middle) * resolution])
+
+
+# This project's own generators (the others are IR-SIM's): name -> builder of the spec's keys.
+OWN_GENERATORS = {"maze": maze_occupancy}
+
+
 def _generated_occupancy(spec: dict, width: float, height: float) -> np.ndarray:
+    if spec.get("name") in OWN_GENERATORS:
+        keys = {k: v for k, v in spec.items() if k != "name"}
+        try:
+            return OWN_GENERATORS[spec["name"]](width=width, height=height, **keys)
+        except TypeError as exc:
+            raise ConfigError(None, "grid_map.generator", f"{exc}; allowed: seed, resolution, passage, loops") from None
     try:
         from irsim.world.map import build_grid_from_generator
     except ImportError:
@@ -88,16 +158,30 @@ def occupancy(grid: GridMap, width: float, height: float) -> np.ndarray:
     return occupied
 
 
-def boundary_cells(grid: GridMap, width: float, height: float, offset: tuple[float, float]) -> np.ndarray:
-    """The occupied cells with a free neighbour (left, right, below, above; beyond the map counts
-    as occupied) as rows x, y, cell width, cell height (centres, in the world frame)."""
+@functools.lru_cache(maxsize=16)
+def occupied_boxes(grid: GridMap, width: float, height: float, offset: tuple[float, float]) -> np.ndarray:
+    """The occupied cells merged into axis-aligned boxes that cover exactly them, as rows x, y
+    (centre), width, height in the world frame: each column's runs of occupied cells, and runs
+    alike in neighbouring columns joined (a maze's wall is one box, not a box per cell)."""
     occupied = occupancy(grid, width, height)
-    padded = np.pad(occupied, 1, constant_values=True)
-    free_beside = ~(padded[:-2, 1:-1] & padded[2:, 1:-1] & padded[1:-1, :-2] & padded[1:-1, 2:])
-    i, j = np.nonzero(occupied & free_beside)
     cell_x, cell_y = width / occupied.shape[0], height / occupied.shape[1]
-    return np.column_stack([offset[0] + (i + 0.5) * cell_x, offset[1] + (j + 0.5) * cell_y,
-                            np.full(len(i), cell_x), np.full(len(i), cell_y)])
+    boxes: list[tuple[float, float, float, float]] = []
+    open_runs: dict[tuple[int, int], int] = {}  # (first row, end row) of a run -> the column it began in
+    for i in range(occupied.shape[0] + 1):
+        runs = set()
+        if i < occupied.shape[0]:
+            column = np.concatenate([[False], occupied[i], [False]])
+            edges = np.flatnonzero(column[1:] != column[:-1])
+            runs = set(zip(edges[::2].tolist(), edges[1::2].tolist()))
+        for run in [run for run in open_runs if run not in runs]:
+            first = open_runs.pop(run)
+            boxes.append((offset[0] + 0.5 * (first + i) * cell_x, offset[1] + 0.5 * (run[0] + run[1]) * cell_y,
+                          (i - first) * cell_x, (run[1] - run[0]) * cell_y))
+        for run in runs:
+            open_runs.setdefault(run, i)
+    table = np.array(boxes, dtype=float).reshape(-1, 4)
+    table.setflags(write=False)
+    return table
 
 
 def resolve_image(name: str, folder: Path | None) -> str:

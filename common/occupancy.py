@@ -14,7 +14,7 @@ import numpy as np
 from scipy import ndimage
 
 from common.geometry import box_distance, circle_distance, segment_distance
-from common.grid_maps import boundary_cells
+from common.grid_maps import occupied_boxes
 from common.kernel_cache import kernel
 from common.placement import BOX, CIRCLE, shape_bounds
 from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, WorldSpec
@@ -91,7 +91,7 @@ def scenario_grid(scenario: Scenario, resolution: float = 0.2, inflation: float 
             others.append(obstacle)
     if scenario.grid_map is not None:
         world = scenario.world
-        for x, y, width, height in boundary_cells(scenario.grid_map, world.width, world.height, world.offset):
+        for x, y, width, height in occupied_boxes(scenario.grid_map, world.width, world.height, world.offset):
             kinds.append(BOX)
             params.append((x, y, width, height, 0.0))
     grid = shapes_grid(scenario.world, np.array(kinds, dtype=np.int64), np.array(params, dtype=float).reshape(-1, 5),

@@ -38,7 +38,7 @@ from common.fields import (  # noqa: F401  (re-exported: the scenario's caps and
     Point,
     Speed,
 )
-from common.grid_maps import GridMap, occupancy
+from common.grid_maps import GridMap, occupied_boxes, occupancy
 from common.kinematics import Pose2D
 from common.motion.spec import Motion
 from common.polygons import is_simple_polygon
@@ -443,6 +443,13 @@ class Scenario(Frozen):
         for obstacle in self.obstacles:
             if include_unobstructed or not obstacle.unobstructed:
                 out = np.minimum(out, obstacle.sdf(points))
+        if self.grid_map is not None:
+            # The map's occupied cells, merged into axis-aligned boxes.
+            cells = occupied_boxes(self.grid_map, self.world.width, self.world.height, self.world.offset)
+            if len(cells):
+                beyond = np.abs(points[:, None, :] - cells[None, :, :2]) - 0.5 * cells[None, :, 2:]
+                sdf = np.linalg.norm(np.maximum(beyond, 0.0), axis=2) + np.minimum(beyond.max(axis=2), 0.0)
+                out = np.minimum(out, sdf.min(axis=1))
         return out
 
     def placement_problems(self, source: str | Path | None = None) -> list[ConfigError]:

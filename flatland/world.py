@@ -27,7 +27,7 @@ from common.motion.movers import Movers, mover_generator
 from flatland.polygons import convex_pieces
 from common.readings import Contact, Imu, Odometry, Readings, frozen, mover_fault
 from common.geometry import box_corner_table
-from common.grid_maps import boundary_cells, occupancy
+from common.grid_maps import occupied_boxes, occupancy
 from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, SegmentObstacle, WorldSpec
 from flatland.clearance import path_clear, swept_capsule
 from flatland.free_step import free_step, step_constants
@@ -208,12 +208,12 @@ class World:
         self._grid, self._clear_boxes = None, box_table  # what path_clear tests a move against
         solid_boxes = box_table
         if scenario.grid_map is not None:
-            # The lidar walks the map's cells (flatland.lidar.cast_grid); contacts meet the cells
-            # free space touches, as boxes: all a footprint coming from free space can reach.
+            # The lidar walks the map's cells (flatland.lidar.cast_grid); contacts meet its occupied
+            # cells merged into boxes (a maze's wall is one box, not a box per cell).
             world = scenario.world
             occupied = occupancy(scenario.grid_map, world.width, world.height)
             self._grid = (occupied, *world.offset, world.width / occupied.shape[0], world.height / occupied.shape[1])
-            cells = boundary_cells(scenario.grid_map, world.width, world.height, world.offset)
+            cells = occupied_boxes(scenario.grid_map, world.width, world.height, world.offset)
             cell_boxes = np.column_stack([cells[:, :2], np.ones(len(cells)), np.zeros(len(cells)), 0.5 * cells[:, 2:]])
             solid_boxes = self._clear_boxes = np.vstack([box_table, cell_boxes])
         self._use(self._circles, circles, _reshape_circle, lambda row: pymunk.Circle(static, row[2], row[:2]))

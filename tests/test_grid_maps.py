@@ -12,7 +12,7 @@ import yaml
 from PIL import Image
 
 from common.errors import ConfigError
-from common.grid_maps import GridMap, boundary_cells, occupancy
+from common.grid_maps import GridMap, occupied_boxes, occupancy
 from common.occupancy import scenario_grid
 from common.scenario import Scenario
 from tests.conftest import optional
@@ -31,15 +31,23 @@ def test_an_image_is_read_with_its_top_row_at_the_top_of_the_world(tmp_path):
     occupied = occupancy(grid, 8.0, 4.0)
     assert occupied.shape == (4, 2) and occupied.sum() == 1 and occupied[0, 1]  # x index 0, the upper row
     # On an 8 m x 4 m world every cell is 2 m square; the cell's centre is (1, 3).
-    assert boundary_cells(grid, 8.0, 4.0, (0.0, 0.0)).tolist() == [[1.0, 3.0, 2.0, 2.0]]
-    assert boundary_cells(grid, 8.0, 4.0, (10.0, 20.0))[0, :2].tolist() == [11.0, 23.0]
+    assert occupied_boxes(grid, 8.0, 4.0, (0.0, 0.0)).tolist() == [[1.0, 3.0, 2.0, 2.0]]
+    assert occupied_boxes(grid, 8.0, 4.0, (10.0, 20.0))[0, :2].tolist() == [11.0, 23.0]
 
 
-def test_only_the_cells_free_space_meets_become_boxes(tmp_path):
-    pixels = np.full((5, 5), 255)
-    pixels[1:4, 1:4] = 0  # a 3 x 3 block: its centre cell is enclosed
-    cells = boundary_cells(GridMap(image=_image(tmp_path, pixels)), 5.0, 5.0, (0.0, 0.0))
-    assert len(cells) == 8 and [2.5, 2.5] not in cells[:, :2].tolist()
+def test_the_occupied_cells_become_few_boxes_that_cover_exactly_them(tmp_path):
+    pixels = np.full((6, 6), 255)
+    pixels[1:4, 1:4] = 0  # a 3 x 3 block: one box
+    pixels[5, 0:6] = 0  # the bottom row: one box
+    pixels[2:5, 5] = 0  # and a bar down the right side, touching it: a box of its own
+    grid = GridMap(image=_image(tmp_path, pixels))
+    boxes = occupied_boxes(grid, 6.0, 6.0, (0.0, 0.0))
+    assert len(boxes) == 3
+    # Painted back cell by cell, the boxes are the occupied cells, no more and no fewer.
+    painted = np.zeros((6, 6), dtype=bool)
+    for x, y, width, height in boxes:
+        painted[int(x - width / 2):int(x + width / 2), int(y - height / 2):int(y + height / 2)] = True
+    assert np.array_equal(painted, occupancy(grid, 6.0, 6.0))
 
 
 def test_the_planners_ground_truth_holds_the_map(tmp_path):
@@ -123,8 +131,24 @@ def test_grid_maps_are_refused_in_one_line_where_they_cannot_be_read_or_built(tm
     with pytest.raises(ConfigError, match=r"world\.obstacle_map\.name: expected a string \(got 3\)"):
         read_world_file(_world_file(tmp_path, {"name": 3}))
     optional("irsim")  # its generators, and their own refusal
-    with pytest.raises(ConfigError, match=r"world\.obstacle_map: Unknown or missing grid_generator name: 'maze'"):
-        read_world_file(_world_file(tmp_path, {"name": "maze", "resolution": 0.1}))
+    with pytest.raises(ConfigError, match=r"world\.obstacle_map: Unknown or missing grid_generator name: 'labyrinth'"):
+        read_world_file(_world_file(tmp_path, {"name": "labyrinth", "resolution": 0.1}))
     scenario = Scenario(grid_map=GridMap(image=_image(tmp_path, np.full((4, 4), 255))))
     with pytest.raises(ConfigError, match="grid_map: an occupancy grid map is not built in the 3D tier"):
         World(scenario)
+
+
+def test_a_maze_is_drawn_from_its_seed_and_every_room_is_reachable():
+    from common.generators import generate
+    from common.grid_maps import maze_occupancy, maze_rooms
+    from common.occupancy import path_exists, scenario_grid
+
+    first, again, other = (maze_occupancy(seed, 10.0, 10.0, 0.1, 1.0, 0.0) for seed in (4, 4, 5))
+    assert np.array_equal(first, again) and not np.array_equal(first, other)
+    # Without shortcuts the doors are a spanning tree: every room reaches every other, one way.
+    scenario = generate("maze", 0, difficulty=1.0)
+    grid = scenario_grid(scenario, resolution=0.1, inflation=scenario.robot.bounding_radius)
+    rooms = maze_rooms(10.0, 10.0, 0.1, 1.0)
+    assert all(path_exists(grid, (*rooms[0], 0.0), tuple(room), 0.1) for room in rooms[1:])
+    open_cells = int((maze_occupancy(0, 10.0, 10.0, 0.1, 1.0, 0.0) < 50).sum())
+    assert int((maze_occupancy(0, 10.0, 10.0, 0.1, 1.0, 1.0) < 50).sum()) > open_cells  # loops open more walls

@@ -62,7 +62,7 @@ def test_generators_are_deterministic_and_seed_sensitive(kind):
 # obstacle changes a digest: then re-measure docs/benchmarks.md and update these on purpose.
 SUITE_DIGESTS = {"open": "7dd5a0357ca22cea", "sparse": "f6460bdee89d46da", "cluttered": "096ce43262819b31",
                  "warehouse": "08dabd76ddf8a343", "trap": "565ea0984c189ebc", "crowd": "d2cafbbb605271fa",
-                 "warehouse_moving": "6b50efbdb4c008a1"}
+                 "warehouse_moving": "6b50efbdb4c008a1", "maze": "00ccff5f1abbcd01"}
 
 
 def _digest(scenarios: list[Scenario]) -> str:
@@ -87,6 +87,7 @@ EDGE_DIGESTS = {
     "trap": ("3e84e209176d1e51", "245e0cf15e4c4755", "b318b182e07cd049"),
     "crowd": ("0f7b32ccc6fe54de", "ee14fee09a3ff416", "b85f9b7586a0b6f0"),
     "warehouse_moving": ("ee53499f0440d1e5", "4cea8f01be9fd453", "31c5d63e58dbfd92"),
+    "maze": ("d94f99af1cf2db3c", "a7cd7c495c9b2285", "112fe3d7fea86262"),
 }
 
 
