@@ -37,7 +37,6 @@ CHANNELS: dict[str, tuple[str, ...]] = {
     "omni_angular": ("v", "lateral", "w"),
     "acker": ("v", "steer"),
 }
-NOISE_SIZES = {"diff": 4, "omni": 2, "omni_angular": 3, "acker": 4}  # IR-SIM's alpha per kinematics
 DEFAULT_NOISE = {"diff": (0.03, 0.0, 0.0, 0.03), "omni": (0.03, 0.03), "omni_angular": (0.03, 0.03, 0.03),
                  "acker": (0.03, 0.0, 0.0, 0.03)}  # IR-SIM's alpha when noise is on and alpha is not given
 
@@ -66,8 +65,8 @@ def body_euler(pose: Pose2D, forward: float, lateral: float, w: float, dt: float
 
 
 class Drive:
-    """The command state of a robot of kinematics other than ``diff``: the last command (for the
-    acceleration window) and a car's steering angle."""
+    """The command state of a robot that is not a noise-free differential drive: the last command
+    (for the acceleration window) and a car's steering angle."""
 
     def __init__(self, robot: RobotProfile, dt: float) -> None:
         self.kinematics = robot.kinematics

@@ -41,7 +41,7 @@ from typing import Any, Callable, Hashable, NamedTuple
 import numpy as np
 from pydantic import ValidationError
 
-from common.drive import CHANNELS as DRIVE_CHANNELS, DEFAULT_NOISE, NOISE_SIZES
+from common.drive import CHANNELS as DRIVE_CHANNELS, DEFAULT_NOISE
 from common.errors import ConfigError, quote
 from common.grid_maps import GridMap, occupancy, resolve_image
 from common.irsim_values import (
@@ -69,6 +69,7 @@ from common.motion.spec import Motion
 from common.polygons import is_simple_polygon
 from common.scenario import (
     MAX_OBSTACLES,
+    NOISE_SIZES,
     BoxObstacle,
     CircleObstacle,
     LidarSpec,

@@ -172,7 +172,7 @@ Obstacle = Annotated[
 
 
 PositiveSpeed = Annotated[float, Field(gt=0.0, le=MAX_SPEED)]
-KINEMATICS = ("diff", "omni", "omni_angular", "acker")
+NOISE_SIZES = {"diff": 4, "omni": 2, "omni_angular": 3, "acker": 4}  # how many values IR-SIM's alpha takes
 
 
 class RobotProfile(Frozen):
@@ -241,9 +241,8 @@ class RobotProfile(Frozen):
             raise ValueError("a polygon footprint's vertices place it; allowed: footprint_offset 0")
         if self.kinematics != "diff" and self.encoder_noise > 0:
             raise ValueError(f"encoder_noise models a differential drive's wheels; allowed: 0 for {self.kinematics}")
-        sizes = {"diff": 4, "omni": 2, "omni_angular": 3, "acker": 4}  # common.drive.NOISE_SIZES
-        if self.motion_noise is not None and len(self.motion_noise) < sizes[self.kinematics]:
-            raise ValueError(f"motion_noise of a {self.kinematics} robot takes {sizes[self.kinematics]} values "
+        if self.motion_noise is not None and len(self.motion_noise) < NOISE_SIZES[self.kinematics]:
+            raise ValueError(f"motion_noise of a {self.kinematics} robot takes {NOISE_SIZES[self.kinematics]} values "
                              f"(IR-SIM's alpha), got {len(self.motion_noise)}")
         return self
 
