@@ -126,7 +126,7 @@ class NavigationEnv(gym.Env):
         readings = self._readings = self.world.step(*command)
         # The reward's speed and turn: the command's for a differential drive, else its forward
         # speed and the turn the robot made.
-        v, w = command if len(command) == 2 and self.actions.kinematics == "diff" else (command[0], readings.velocity[1])
+        v, w = command if self.actions.kinematics == "diff" else (command[0], readings.velocity[1])
         task, previous = self.task, self.task.distance
         outcome = task.step(readings)
         reached = outcome == "success"

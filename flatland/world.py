@@ -65,9 +65,9 @@ class World:
     :class:`Readings` snapshot. A robot of other kinematics takes its own command
     (:mod:`common.drive`: ``step(forward, lateral)`` for ``omni``, and so on); its readings'
     velocity is (forward speed, turn rate) as commanded, and its odometry integrates the command
-    (exact unless motion noise or a contact moved it otherwise). ``conditions`` (:mod:`common.conditions`; flatland's defaults: an
-    ideal robot) may change the robot, its sensors' noise and its actuation; ``world.scenario`` is
-    the scenario as conditioned.
+    (exact unless motion noise or a contact moved it otherwise). ``conditions``
+    (:mod:`common.conditions`; flatland's defaults: an ideal robot) may change the robot, its
+    sensors' noise and its actuation; ``world.scenario`` is the scenario as conditioned.
 
     The scenario's movers (:mod:`common.motion`) step after the robot, as in IR-SIM, and the lidar
     sees them where they end the step. The robot's contact with one is judged where both end the
