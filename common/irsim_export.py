@@ -129,6 +129,10 @@ def scenario_to_irsim(scenario: Scenario) -> dict[str, Any]:
         shape = {"name": "circle", "radius": robot.radius, "center": [robot.footprint_offset, 0.0]}
     elif robot.shape == "polygon":
         shape = {"name": "polygon", "vertices": [list(vertex) for vertex in robot.vertices]}
+    elif robot.shape == "compound":
+        shape = {"name": "compound", "parts": [
+            {"name": "circle", "radius": part.radius, "center": list(part.center)} if part.radius is not None
+            else {"name": "polygon", "vertices": [list(vertex) for vertex in part.vertices]} for part in robot.parts]}
     else:
         # IR-SIM puts a rectangle half its shape's wheelbase ahead of the pose.
         shape = {"name": "rectangle", "length": robot.length, "width": robot.width,

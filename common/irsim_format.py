@@ -111,9 +111,13 @@ SHAPE_KEYS = {
     "rectangle": ("name", "length", "width", "wheelbase"),
     "polygon": ("name", "vertices", *_RANDOM_POLYGON_KEYS),
     "linestring": ("name", "vertices", *_RANDOM_POLYGON_KEYS),
+    "compound": ("name", "parts"),
 }
+PART_SHAPES = ("circle", "rectangle", "polygon")  # IR-SIM's compound parts (fixed shapes: no random ones here)
+PART_KEYS = {name: (*(key for key in SHAPE_KEYS[name] if key not in (*_RANDOM_POLYGON_KEYS, "radius_range")), "pose")
+             for name in PART_SHAPES}
 OBSTACLE_SHAPES = ("circle", "rectangle", "polygon", "linestring")
-ROBOT_SHAPES = ("circle", "rectangle", "polygon")  # the footprints RobotProfile can express
+ROBOT_SHAPES = ("circle", "rectangle", "polygon", "compound")  # the footprints RobotProfile can express
 # ``non_overlapping`` is accepted and, as IR-SIM's factory does, ignored (IR-SIM reads it only as an
 # argument of its env's random_obstacle_position, never from a file).
 DISTRIBUTION_KEYS = ("name", "range_low", "range_high", "min_distance", "radius", "center", "3d", "non_overlapping")
@@ -135,6 +139,7 @@ class _Shape(NamedTuple):
     radius: float = 0.0
     length: float = 0.0
     width: float = 0.0
+    parts: tuple[dict, ...] = ()  # a compound's, as FootprintPart fields in the body frame
 
 
 
@@ -425,6 +430,8 @@ def _shape(item: Value, draws: _Draws, allowed: tuple[str, ...]) -> _Shape:
     shape = draws.reads.once(("shape", allowed), (item.value,), lambda: _read_shape(item, draws, allowed))
     if shape.kind in ("polygon", "linestring"):  # every object's vertices count, shared or not
         draws.spend("vertices", len(shape.points), join(item.path, "vertices"), "fewer or simpler polygons")
+    for part in shape.parts:
+        draws.spend("vertices", len(part.get("vertices", ())), join(item.path, "parts"), "fewer or simpler parts")
     return shape
 
 
@@ -438,6 +445,8 @@ def _read_shape(item: Value, draws: _Draws, allowed: tuple[str, ...]) -> _Shape:
     if name not in allowed:
         raise fail(at("name"), f"unsupported shape {quote(name)}; allowed: {', '.join(allowed)}")
     check_keys(shape, SHAPE_KEYS[name], item.path)
+    if name == "compound":
+        return _Shape("compound", np.zeros((0, 2)), parts=_compound_parts(Value(shape.get("parts"), at("parts")), draws))
     # An Ackermann wheelbase moves the outline forward by half of it, as in IR-SIM.
     shift = 0.5 * real(shape["wheelbase"], at("wheelbase"), 0) if shape.get("wheelbase") is not None else 0.0
     random_shape = shape.get("random_shape") is not None and boolean(shape["random_shape"], at("random_shape"))
@@ -464,6 +473,33 @@ def _read_shape(item: Value, draws: _Draws, allowed: tuple[str, ...]) -> _Shape:
     if random_shape:
         vertices = _random_polygon(shape, item.path, draws, default_convex=name == "linestring")
     return _Shape(name, vertices)
+
+
+def _compound_parts(item: Value, draws: _Draws) -> tuple[dict, ...]:
+    """IR-SIM's compound parts, each placed by its ``pose`` in the body frame: rectangles become
+    polygons (their corners), circles keep their centre and radius."""
+    if not isinstance(item.value, list) or not item.value:
+        raise fail(item.path, f"expected a non-empty list of part shapes (got {quote(item.value)})")
+    parts = []
+    for index, part in enumerate(item.value):
+        path = f"{item.path}[{index}]"
+        name = string(mapping_of(part, path).get("name"), join(path, "name")).lower()
+        if name not in PART_SHAPES:
+            raise fail(join(path, "name"), f"unsupported part {quote(name)}; allowed: {', '.join(PART_SHAPES)}")
+        check_keys(part, PART_KEYS[name], path)
+        pose = fit3(number_list(part.get("pose", [0, 0, 0]), join(path, "pose"), size=3))
+        shape = _read_shape(Value({key: value for key, value in part.items() if key != "pose"}, path), draws, PART_SHAPES)
+        if shape.kind == "circle":
+            parts.append({"center": _transform_point(shape.points[0], pose), "radius": shape.radius})
+            continue
+        if shape.kind == "rectangle":
+            half_length, half_width = 0.5 * shape.length, 0.5 * shape.width
+            corners = [(shape.points[0, 0] + sx * half_length, sy * half_width)
+                       for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+        else:
+            corners = _polygon_ring(shape.points, join(path, "vertices"))
+        parts.append({"vertices": tuple(_transform_point(np.asarray(corner), pose) for corner in corners)})
+    return tuple(parts)
 
 
 def _random_polygon(shape: dict, path: str, draws: _Draws, default_convex: bool) -> np.ndarray:
@@ -613,7 +649,7 @@ def _robot_profile(entry: Entry, shape: _Shape, path: str) -> RobotProfile:
     accelerations = number_list(acce.value, acce.path, size=size, allow_inf=True)
     shape_path = value_of(entry, "shape", None, path).path
     fields = {"kinematics": Value(name, join(kinematics.path, "name"))}
-    if shape.kind != "polygon":
+    if shape.kind not in ("polygon", "compound"):
         fields["footprint_offset"] = Value(float(shape.points[0, 0]), shape_path)
     static = value_of(entry, "static", False, path)
     if boolean(static.value, static.path):
@@ -641,6 +677,8 @@ def _robot_profile(entry: Entry, shape: _Shape, path: str) -> RobotProfile:
     elif shape.kind == "polygon":
         fields.update(shape=Value("polygon", shape_path),
                       vertices=Value(tuple(map(tuple, shape.points.tolist())), join(shape_path, "vertices")))
+    elif shape.kind == "compound":
+        fields.update(shape=Value("compound", shape_path), parts=Value(shape.parts, join(shape_path, "parts")))
     else:
         fields.update(shape=Value("box", shape_path), length=Value(shape.length, shape_path),
                       width=Value(shape.width, shape_path))

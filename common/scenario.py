@@ -15,6 +15,7 @@ than the world's diagonal.
 from __future__ import annotations
 
 import math
+from functools import cached_property
 from pathlib import Path
 from typing import Annotated, Any, Literal, Union
 
@@ -172,6 +173,34 @@ Obstacle = Annotated[
 
 
 PositiveSpeed = Annotated[float, Field(gt=0.0, le=MAX_SPEED)]
+MAX_PARTS = 32  # of a compound footprint: each is a collision shape the robot carries every step
+FootprintVertices = Annotated[tuple[tuple[Coordinate, Coordinate], ...], Field(min_length=3, max_length=MAX_VERTICES)]
+
+
+class FootprintPart(Frozen):
+    """One part of a compound footprint, in the robot frame: a simple polygon (``vertices``) or a
+    circle (``radius`` about ``center``), as IR-SIM's compound shape's parts."""
+
+    vertices: FootprintVertices | None = OMITTED_WHEN_ABSENT
+    center: tuple[Coordinate, Coordinate] = omitted_at_default((0.0, 0.0))
+    radius: Length | None = OMITTED_WHEN_ABSENT
+
+    @model_validator(mode="after")
+    def _one_outline(self) -> "FootprintPart":
+        if (self.vertices is None) == (self.radius is None):
+            raise ValueError("a part is a polygon (vertices) or a circle (radius, center), not both or neither")
+        if self.vertices is not None and not is_simple_polygon(np.asarray(self.vertices, dtype=float)):
+            raise ValueError("the part crosses itself or has no area; allowed: a simple polygon, vertices in order")
+        return self
+
+    @property
+    def reach(self) -> float:
+        """How far the part's farthest point lies from the robot's reference point."""
+        if self.vertices is not None:
+            return max(math.hypot(x, y) for x, y in self.vertices)
+        return math.hypot(*self.center) + self.radius
+
+
 NOISE_SIZES = {"diff": 4, "omni": 2, "omni_angular": 3, "acker": 4}  # how many values IR-SIM's alpha takes
 
 
@@ -188,17 +217,18 @@ class RobotProfile(Frozen):
     and the acceleration limits (m/s², rad/s²) constrain raw ``World.step`` commands, as IR-SIM's
     ``vel_min`` and ``acce`` do. ``footprint_offset``: how far ahead of the robot's reference point
     (its pose, a car's rear axle) the footprint's centre sits; a ``polygon`` footprint is its
-    ``vertices`` in the robot frame (flatland only). ``motion_noise``: IR-SIM's ``alpha``
+    ``vertices`` in the robot frame, a ``compound`` one the union of its ``parts`` (IR-SIM's
+    compound shape; both flatland only). ``motion_noise``: IR-SIM's ``alpha``
     of its kinematics' motion noise (:mod:`common.drive`; None: none). ``static``: the robot never
     moves, whatever it is commanded (IR-SIM's static robot, a sensor on a post).
     """
 
-    shape: Literal["circle", "box", "polygon"] = "circle"
+    shape: Literal["circle", "box", "polygon", "compound"] = "circle"
     radius: Length = 0.2
     length: Length = 0.3
     width: Length = 0.2
-    vertices: Annotated[tuple[tuple[Coordinate, Coordinate], ...], Field(max_length=MAX_VERTICES)] | None = \
-        OMITTED_WHEN_ABSENT
+    vertices: FootprintVertices | None = OMITTED_WHEN_ABSENT
+    parts: Annotated[tuple[FootprintPart, ...], Field(min_length=1, max_length=MAX_PARTS)] | None = OMITTED_WHEN_ABSENT
     footprint_offset: Annotated[float, Field(ge=-MAX_LENGTH, le=MAX_LENGTH)] = omitted_at_default(0.0)
     kinematics: Literal["diff", "omni", "omni_angular", "acker"] = omitted_at_default("diff")
     wheel_radius: Length = 0.05
@@ -237,8 +267,13 @@ class RobotProfile(Frozen):
                              "allowed: shape: polygon with vertices, or no vertices")
         if self.vertices is not None and not is_simple_polygon(np.asarray(self.vertices, dtype=float)):
             raise ValueError("the footprint crosses itself or has no area; allowed: a simple polygon, vertices in order")
-        if self.vertices is not None and self.footprint_offset:
-            raise ValueError("a polygon footprint's vertices place it; allowed: footprint_offset 0")
+        if (self.shape == "compound") != (self.parts is not None):
+            raise ValueError("a compound footprint takes its parts (polygons and circles in the robot frame), and "
+                             "only it; allowed: shape: compound with parts, or no parts")
+        if self.parts is not None and sum(len(part.vertices or ()) for part in self.parts) > MAX_VERTICES:
+            raise ValueError(f"the parts hold more than {MAX_VERTICES} vertices in all; allowed: at most {MAX_VERTICES}")
+        if (self.vertices is not None or self.parts is not None) and self.footprint_offset:
+            raise ValueError(f"a {self.shape} footprint's vertices place it; allowed: footprint_offset 0")
         if self.kinematics != "diff" and self.encoder_noise > 0:
             raise ValueError(f"encoder_noise models a differential drive's wheels; allowed: 0 for {self.kinematics}")
         if self.motion_noise is not None and len(self.motion_noise) < NOISE_SIZES[self.kinematics]:
@@ -261,12 +296,28 @@ class RobotProfile(Frozen):
         """The lowest angular velocity a raw command may reach."""
         return -self.w_max if self.w_min is None else self.w_min
 
+    @cached_property
+    def outline(self) -> tuple[FootprintPart, ...]:
+        """The footprint as parts in the robot frame: one for a circle, box or polygon (a box's
+        corners counter-clockwise), a compound's own."""
+        if self.parts is not None:
+            return self.parts
+        if self.vertices is not None:
+            return (FootprintPart(vertices=self.vertices),)
+        if self.shape == "circle":
+            return (FootprintPart(center=(self.footprint_offset, 0.0), radius=self.radius),)
+        half_length, half_width = 0.5 * self.length, 0.5 * self.width
+        return (FootprintPart(vertices=tuple((self.footprint_offset + sx * half_length, sy * half_width)
+                                             for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1)))),)
+
     @property
     def bounding_radius(self) -> float:
         """Radius of the smallest circle about the reference point around the footprint (the
         conservative clearance)."""
         if self.vertices is not None:
             return max(math.hypot(x, y) for x, y in self.vertices)
+        if self.parts is not None:
+            return max(part.reach for part in self.parts)
         half = self.radius if self.shape == "circle" else 0.5 * math.hypot(self.length, self.width)
         return half + abs(self.footprint_offset)
 

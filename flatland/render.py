@@ -59,13 +59,13 @@ class Renderer:
             FigureCanvasAgg(self.figure)
         self.axes = self.figure.add_subplot(1, 1, 1)
         self._draw_static()
-        robot = scenario.robot
-        if robot.shape == "circle":
-            self.robot_patch: patches.Patch = patches.Circle((0, 0), robot.radius, facecolor="tab:blue", alpha=0.8)
-        else:
-            corners = 4 if robot.vertices is None else len(robot.vertices)
-            self.robot_patch = patches.Polygon(np.zeros((corners, 2)), closed=True, facecolor="tab:blue", alpha=0.8)
-        self.axes.add_patch(self.robot_patch)
+        style = {"facecolor": "tab:blue", "alpha": 0.8}
+        self.robot_patches: list[patches.Patch] = [
+            patches.Circle((0, 0), part.radius, **style) if part.radius is not None
+            else patches.Polygon(np.asarray(part.vertices, dtype=float), closed=True, **style)
+            for part in scenario.robot.outline]
+        for patch in self.robot_patches:
+            self.axes.add_patch(patch)
         (self.heading_line,) = self.axes.plot([], [], color="white", linewidth=1.5)
         (self.path_line,) = self.axes.plot([], [], color="tab:blue", linewidth=1.0, alpha=0.7)
         self.beams = LineCollection([], colors="tab:red", linewidths=0.5, alpha=0.5)
@@ -116,16 +116,16 @@ class Renderer:
         x, y, yaw = readings.pose
         robot = self.scenario.robot
         c, s = math.cos(yaw), math.sin(yaw)
-        ahead = robot.footprint_offset  # the footprint's centre ahead of the pose (a car's rear axle)
-        if isinstance(self.robot_patch, patches.Circle):
-            self.robot_patch.center = (x + ahead * c, y + ahead * s)
-            reach = ahead + robot.radius
-        else:
-            hl, hw = 0.5 * robot.length, 0.5 * robot.width
-            local = np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]]) + (ahead, 0.0) if robot.vertices is None \
-                else np.asarray(robot.vertices, dtype=float)
-            self.robot_patch.set_xy(local @ np.array([[c, s], [-s, c]]) + (x, y))
-            reach = float(local[:, 0].max())
+        rotation = np.array([[c, s], [-s, c]])
+        reach = 0.0  # how far ahead the heading line reaches: the footprint's front
+        for patch, part in zip(self.robot_patches, robot.outline):
+            if part.radius is not None:
+                patch.center = tuple(np.asarray(part.center) @ rotation + (x, y))
+                reach = max(reach, part.center[0] + part.radius)
+            else:
+                local = np.asarray(part.vertices, dtype=float)
+                patch.set_xy(local @ rotation + (x, y))
+                reach = max(reach, float(local[:, 0].max()))
         self.heading_line.set_data([x, x + reach * math.cos(yaw)], [y, y + reach * math.sin(yaw)])
         lidar = self.scenario.lidar
         ox = x + math.cos(yaw) * lidar.offset[0] - math.sin(yaw) * lidar.offset[1]
@@ -171,7 +171,8 @@ class Renderer:
 def plot_odometry_drift(scenario: Scenario, true_path: Sequence, estimate: Sequence, path: str | Path) -> Path:
     """The true path against the wheel-odometry estimate, drawn over the world (the 2D tutorial's figure)."""
     renderer = Renderer(scenario)
-    renderer.robot_patch.set_visible(False)
+    for patch in renderer.robot_patches:
+        patch.set_visible(False)
     truth, guess = np.asarray(true_path), np.asarray(estimate)
     renderer.axes.plot(truth[:, 0], truth[:, 1], color="tab:blue", linewidth=1.5, label="true path")
     renderer.axes.plot(guess[:, 0], guess[:, 1], color="tab:orange", linewidth=1.5, linestyle="--", label="wheel odometry")

@@ -244,19 +244,16 @@ class World:
     def _build_robot(self, scenario: Scenario) -> None:
         robot = scenario.robot
         self.body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
-        ahead = robot.footprint_offset
-        if robot.shape == "circle":
-            pieces: list[pymunk.Shape] = [pymunk.Circle(self.body, robot.radius, (ahead, 0.0))]
-        elif robot.shape == "box":
-            half_length, half_width = 0.5 * robot.length, 0.5 * robot.width
-            pieces = [pymunk.Poly(self.body, [(ahead + sx * half_length, sy * half_width)
-                                              for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))])]
-        else:  # pymunk collides convex shapes only
-            pieces = [pymunk.Poly(self.body, [tuple(v) for v in piece])
-                      for piece in convex_pieces(np.asarray(robot.vertices, dtype=float))]
+        pieces: list[pymunk.Shape] = []
+        for part in robot.outline:
+            if part.radius is not None:
+                pieces.append(pymunk.Circle(self.body, part.radius, part.center))
+            else:  # pymunk collides convex shapes only
+                pieces.extend(pymunk.Poly(self.body, [tuple(v) for v in piece])
+                              for piece in convex_pieces(np.asarray(part.vertices, dtype=float)))
         self.footprint = pieces
         # A circle about the reference point is swept exactly; anything else pose by pose.
-        self._swept_circle = robot.shape == "circle" and ahead == 0.0
+        self._swept_circle = robot.shape == "circle" and robot.footprint_offset == 0.0
         self._sweep_radius = robot.bounding_radius
         for piece in pieces:
             # One group: a concave footprint's convex pieces, which share edges, never touch each other.

@@ -61,7 +61,7 @@ def refuse_unmodelled(scenario: Scenario) -> None:
                           f"{quote(scenario.robot.kinematics)}; allowed: diff")
     if scenario.grid_map is not None:
         raise ConfigError(None, "grid_map", "an occupancy grid map is not built in the 3D tier; allowed: null")
-    if scenario.robot.shape == "polygon":
+    if scenario.robot.shape in ("polygon", "compound"):
         raise ConfigError(None, "robot.shape", "the 3D robot's body is the URDF's box; allowed: circle, box")
     for field, value in (("motion_noise", scenario.robot.motion_noise), ("static", scenario.robot.static or None)):
         if value is not None:

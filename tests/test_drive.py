@@ -1,5 +1,5 @@
 """The controlled robot's kinematics other than diff, its motion noise (common.drive) and its
-footprints: IR-SIM's omni, omni_angular and acker, cars and polygon robots, in flatland step for
+footprints: IR-SIM's omni, omni_angular and acker, cars, polygon and compound robots, in flatland step for
 step as IR-SIM moves them, in the gym env's action space, and refused with one line where only a
 differential drive will do."""
 
@@ -31,6 +31,12 @@ ROBOTS = {
     # A differential drive with a concave footprint (an arrowhead: pymunk collides its convex pieces).
     "polygon": {"kinematics": {"name": "diff"}, "shape": {"name": "polygon", "vertices": [
         [0.35, 0.0], [-0.2, 0.3], [-0.05, 0.0], [-0.2, -0.3]]}, "vel_min": [-1.0, -2.0], "vel_max": [1.5, 2.0]},
+    # IR-SIM's compound shape: parts placed by their poses, one of them a circle off the centre line.
+    "compound": {"kinematics": {"name": "diff"}, "shape": {"name": "compound", "parts": [
+        {"name": "rectangle", "length": 0.8, "width": 0.3},
+        {"name": "rectangle", "length": 0.3, "width": 0.6, "pose": [-0.25, 0.3, 0.5]},
+        {"name": "circle", "radius": 0.2, "center": [0.1, 0.0], "pose": [0.4, -0.3, 0]}]},
+        "vel_min": [-1.0, -2.0], "vel_max": [1.5, 2.0]},
     # IR-SIM's motion noise, drawn from the world's generator in IR-SIM's order: equal draws.
     "diff_noisy": {"kinematics": {"name": "diff", "noise": True, "alpha": [0.1, 0.0, 0.02, 0.3]},
                    "shape": {"name": "circle", "radius": 0.3}, "vel_min": [-1.0, -1.5], "vel_max": [1.5, 1.5]},
@@ -95,6 +101,28 @@ def test_each_kinematics_moves_and_collides_as_irsim_does(name, tmp_path):
     finally:
         env.end(0)
     assert collided >= 0, "no run of commands collided: the contact was never compared"
+
+
+@pytest.mark.parametrize("name", ["polygon", "compound", "acker"])
+def test_each_footprint_covers_what_irsims_covers(name, tmp_path):
+    """The footprint's outline in the body frame against IR-SIM's own geometry (its circles are
+    polygons of 2 mm chords, hence the tolerance)."""
+    irsim = optional("irsim")
+    from shapely.geometry import Point, Polygon
+    from shapely.ops import unary_union
+
+    import flatland
+
+    path = _world_file(tmp_path, name)
+    robot = flatland.load_world(path, seed=0).scenario.robot
+    ours = unary_union([Point(part.center).buffer(part.radius, quad_segs=64) if part.radius is not None
+                        else Polygon(part.vertices) for part in robot.outline])
+    env = irsim.make(path, display=False, log_level="ERROR", seed=0)
+    try:
+        theirs = env.robot.original_geometry
+        assert ours.symmetric_difference(theirs).area <= 2e-3 * theirs.area
+    finally:
+        env.end(0)
 
 
 def test_motion_noise_moves_the_robot_where_the_command_alone_would_not_and_odometry_does_not_see_it():

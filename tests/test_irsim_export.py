@@ -12,7 +12,7 @@ from common.generators import generate
 from common.irsim_export import scenario_to_irsim
 from common.irsim_format import parse_irsim
 from common.motion.spec import Dash, Motion, Orca, Sfm
-from common.scenario import CircleObstacle, RobotProfile
+from common.scenario import CircleObstacle, FootprintPart, RobotProfile
 from tests.conftest import optional
 
 
@@ -43,7 +43,10 @@ def test_movers_read_back_from_their_irsim_file(tmp_path):
     RobotProfile(kinematics="acker", shape="box", length=1.0, width=0.6, footprint_offset=0.35, steer_max=0.5,
                  axle_distance=0.7, steer_mode="angular", accel_steer=1.0),
     RobotProfile(kinematics="acker", radius=0.4, footprint_offset=0.2, motion_noise=(0.1, 0.0, 0.0, 0.2)),
-], ids=["diff box", "omni", "omni_angular", "car", "round car"])
+    RobotProfile(shape="polygon", vertices=((0.3, 0.0), (-0.2, 0.25), (-0.05, 0.0), (-0.2, -0.25))),
+    RobotProfile(shape="compound", parts=(FootprintPart(vertices=((-0.3, -0.1), (0.3, -0.1), (0.3, 0.1), (-0.3, 0.1))),
+                                          FootprintPart(center=(-0.2, 0.15), radius=0.12))),
+], ids=["diff box", "omni", "omni_angular", "car", "round car", "polygon", "compound"])
 def test_the_robot_reads_back_from_its_irsim_file(robot, tmp_path):
     scenario = generate("sparse", 1).model_copy(update={"robot": robot})
     back = parse_irsim(scenario_to_irsim(scenario), source=tmp_path / "w.yaml").robot

@@ -298,3 +298,25 @@ def test_the_vertices_of_all_polygons_and_polylines_are_capped():
     Scenario.model_validate({**world, "obstacles": [PolygonObstacle(vertices=ring)] * 5 + [SegmentObstacle(points=line)] * 5})
     with pytest.raises(ValueError, match=f"11,000 vertices in all; allowed: at most {MAX_TOTAL_VERTICES:,}"):
         Scenario.model_validate({**world, "obstacles": [PolygonObstacle(vertices=ring)] * 6 + [SegmentObstacle(points=line)] * 5})
+
+
+@pytest.mark.parametrize(("fields", "message"), [
+    ({"shape": "compound"}, "a compound footprint takes its parts"),
+    ({"parts": ({"radius": 0.2},)}, "a compound footprint takes its parts"),
+    ({"shape": "compound", "parts": ({"radius": 0.2, "vertices": ((0, 0), (1, 0), (0, 1))},)}, "not both or neither"),
+    ({"shape": "compound", "parts": ({"center": (0.1, 0.0)},)}, "not both or neither"),
+    ({"shape": "compound", "parts": ({"vertices": ((0, 0), (1, 1), (1, 0), (0, 1))},)}, "crosses itself"),
+    ({"shape": "compound", "parts": ({"radius": 0.2},), "footprint_offset": 0.1}, "allowed: footprint_offset 0"),
+    ({"shape": "compound", "parts": ({"vertices": tuple((math.cos(a), math.sin(a)) for a in
+                                                        np.linspace(0, 6, 600))},) * 2}, "at most 1000"),
+])
+def test_a_compound_footprint_is_parts_and_only_parts(fields, message):
+    with pytest.raises(ValueError, match=message):
+        RobotProfile(**fields)
+
+
+def test_a_compound_footprint_reaches_as_far_as_its_farthest_part():
+    robot = RobotProfile(shape="compound", parts=({"vertices": ((-0.3, -0.1), (0.3, -0.1), (0.3, 0.1), (-0.3, 0.1))},
+                                                  {"center": (0.0, 0.4), "radius": 0.2}))
+    assert robot.bounding_radius == pytest.approx(0.6)
+    assert [part.radius for part in robot.outline] == [None, 0.2]

@@ -77,8 +77,9 @@ class Movers:
         self._states = np.empty((self.count, 8))
         self._circle_rows, self._box_rows = np.empty((len(self._circles), 3)), np.empty((len(self._boxes), 6))
         robot = scenario.robot
-        if robot.shape == "polygon":
-            raise ConfigError(None, "robot.shape", "a polygon robot among movers is not modelled; allowed: circle, box")
+        if robot.shape in ("polygon", "compound"):
+            raise ConfigError(None, "robot.shape", f"a {robot.shape} robot among movers is not modelled; allowed: "
+                              "circle, box")
         if scenario.grid_map is not None:
             raise ConfigError(None, "grid_map", "movers on a grid map are not modelled (they would not see it); "
                               "allowed: a grid map without movers, or movers among shapes")
