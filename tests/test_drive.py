@@ -203,8 +203,10 @@ def test_the_env_takes_one_action_per_channel_of_the_robots_kinematics(kinematic
 def test_controllers_policies_curricula_and_the_3d_tier_refuse_another_drive_in_one_line(tmp_path):
     from common.controllers import make_controller
     from common.curriculum.schema import load_curriculum
-    from physics3d.world import World
+    from common.generators import generate
     from common.scenario import LidarSpec
+    from flatland.world import World as FlatWorld
+    from physics3d.world import World
 
     omni = RobotProfile(kinematics="omni")
     with pytest.raises(ConfigError, match="robot.kinematics: the potential_field controller drives a differential"):
@@ -213,6 +215,11 @@ def test_controllers_policies_curricula_and_the_3d_tier_refuse_another_drive_in_
         World(Scenario(robot=omni))
     with pytest.raises(ConfigError, match="robot.motion_noise: IR-SIM's kinematic stand-in is not modelled"):
         World(Scenario(robot=RobotProfile(motion_noise=(0.1, 0, 0, 0.1))))
+    compound = RobotProfile(shape="compound", parts=({"radius": 0.2}, {"center": (-0.2, 0.0), "radius": 0.15}))
+    with pytest.raises(ConfigError, match="robot.shape: the 3D robot's body is the URDF's box"):
+        World(Scenario(robot=compound))
+    with pytest.raises(ConfigError, match="robot.shape: a compound robot among movers is not modelled"):
+        FlatWorld(generate("crowd", 1, 0.5).model_copy(update={"robot": compound}))
     curriculum = yaml.safe_load((Path(__file__).resolve().parents[1] / "curricula" / "stage1_2d.yaml").read_text())
     curriculum["stages"][0]["env_kwargs"]["robot"] = {"kinematics": "omni"}
     path = tmp_path / "omni.yaml"
