@@ -231,8 +231,9 @@ def test_short_ppo_training_beats_a_random_policy_and_round_trips(tmp_path):
     from stable_baselines3 import PPO
 
     import flatland  # noqa: F401
-    from common.curriculum.policy import PolicyAgent, load_policy
+    from common.curriculum.policy import load_policy
     from common.curriculum.policy_file import save_policy
+    from common.policy_agent import PolicyAgent
 
     from stable_baselines3.common.env_util import make_vec_env
 

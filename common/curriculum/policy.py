@@ -14,17 +14,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 import torch
 
-from common.actions import ACTION_SPACE, ActionMapping
-from common.curriculum.policy_file import MANIFEST, Manifest, Normalizer, PolicyFile
-from common.drive import refuse_other_drives
+from common.actions import ACTION_SPACE
+from common.curriculum.policy_file import MANIFEST, Manifest, PolicyFile
 from common.errors import ConfigError, quote
 from common.files import size_text
-from common.observations import ObservationLayout, make_layout
-from common.readings import Readings
+from common.observations import make_layout
+from common.policy_agent import PolicyAgent
 from common.scenario import LidarSpec, RobotProfile
 
 POLICY_WEIGHTS = "policy"  # policy.pth: the network's state dict
@@ -146,41 +143,6 @@ def _load_module(module, state: Any, file: PolicyFile, name: str, what: str) -> 
 def _network_description(manifest: Manifest) -> str:
     net = manifest.policy_kwargs.model_dump(exclude_none=True) or "SB3's defaults"
     return f"a {manifest.algorithm.upper()} policy with policy_kwargs {net} (the manifest's)"
-
-
-class PolicyAgent:
-    """A trained policy driven like a controller: readings -> observation -> action -> (v, w).
-
-    It builds its observations with the layout in its manifest, so evaluation in either tier
-    sees what the policy saw in training. ``model`` is anything with SB3's ``predict``: a
-    policy network or a whole algorithm. ``max_steps`` is the episode length it trained with.
-    """
-
-    def __init__(self, model, observation: str, goal_distance_scale: float, normalizer: Normalizer | None = None,
-                 name: str = "policy", action_mapping: str = "linear", max_steps: int | None = None,
-                 env_kwargs: dict | None = None, home: tuple[str, str, int, int] | None = None) -> None:
-        self.model, self.observation, self.goal_distance_scale = model, observation, goal_distance_scale
-        self.normalizer, self.name, self.action_mapping = normalizer, name, action_mapping
-        self.max_steps = max_steps
-        self.env_kwargs = dict(env_kwargs or {})  # what it trained with: its conditions are evaluated by default
-        self.home = home  # (tier, suite, first seed, episodes) of its own test figure: its evaluation by default
-
-    def bind(self, robot: RobotProfile, lidar: LidarSpec, goal_threshold: float = 0.3) -> None:
-        # Policy files hold a two-number (v, w) actor: they train and drive differential drives.
-        refuse_other_drives(robot, f"the policy {self.name!r}")
-        self.layout: ObservationLayout = make_layout(self.observation, robot, lidar, self.goal_distance_scale)
-        self.mapping = ActionMapping(robot, self.action_mapping)
-
-    def reset(self) -> None:
-        self.layout.reset()  # a layout with memory (lidar79_motion) starts the episode afresh
-
-    def observe(self, readings: Readings, goal: tuple[float, float]) -> np.ndarray:
-        obs = self.layout(readings, goal)
-        return self.normalizer(obs) if self.normalizer is not None else obs
-
-    def act(self, readings: Readings, goal: tuple[float, float]) -> tuple[float, float]:
-        action, _ = self.model.predict(self.observe(readings, goal), deterministic=True)
-        return self.mapping.to_velocity(action)
 
 
 def load_policy(path: str | Path | PolicyFile, device: str = "cpu", name: str | None = None) -> PolicyAgent:

@@ -25,7 +25,7 @@ from common.atomic import atomic_write
 from common.conditions import conditions_of
 from common.curriculum.comparison import write_csv
 from common.curriculum.hyperparams import resolve_hyperparams
-from common.curriculum.policy import PolicyAgent, algorithm_class, load_weights, vec_env_class
+from common.curriculum.policy import algorithm_class, load_weights, vec_env_class
 from common.curriculum.policy_file import Normalizer, update_manifest
 from common.curriculum.replay import load_replay
 from common.curriculum.run_directory import (LOCK_NAME, MARKER, EvalLog, StagePaths, check_claimable, clear_unstarted,
@@ -35,6 +35,7 @@ from common.curriculum.stage import TEST_SEED_SHIFT, stage_radius, stage_scenari
 from common.errors import ConfigError
 from common.evaluation import Summary, evaluate
 from common.observations import DEFAULT_GOAL_DISTANCE_SCALE
+from common.policy_agent import PolicyAgent
 from common.yaml_io import read_yaml
 
 

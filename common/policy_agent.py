@@ -1,0 +1,53 @@
+"""A trained policy driven like a controller, whatever runs its network (torch or onnxruntime).
+
+This module imports neither torch nor stable-baselines3: a robot running an exported policy
+(:mod:`common.curriculum.onnx_policy`) needs only NumPy and onnxruntime besides this project's layouts.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+from common.actions import ActionMapping
+from common.drive import refuse_other_drives
+from common.observations import ObservationLayout, make_layout
+from common.readings import Readings
+from common.scenario import LidarSpec, RobotProfile
+
+
+class PolicyAgent:
+    """A trained policy driven like a controller: readings -> observation -> action -> (v, w).
+
+    It builds its observations with the layout in its manifest, so evaluation in either tier
+    sees what the policy saw in training. ``model`` is anything with SB3's ``predict``: a
+    policy network or a whole algorithm. ``max_steps`` is the episode length it trained with.
+    """
+
+    def __init__(self, model, observation: str, goal_distance_scale: float,
+                 normalizer: Callable[[np.ndarray], np.ndarray] | None = None, name: str = "policy",
+                 action_mapping: str = "linear", max_steps: int | None = None, env_kwargs: dict | None = None,
+                 home: tuple[str, str, int, int] | None = None) -> None:
+        self.model, self.observation, self.goal_distance_scale = model, observation, goal_distance_scale
+        self.normalizer, self.name, self.action_mapping = normalizer, name, action_mapping
+        self.max_steps = max_steps
+        self.env_kwargs = dict(env_kwargs or {})  # what it trained with: its conditions are evaluated by default
+        self.home = home  # (tier, suite, first seed, episodes) of its own test figure: its evaluation by default
+
+    def bind(self, robot: RobotProfile, lidar: LidarSpec, goal_threshold: float = 0.3) -> None:
+        # Policy files hold a two-number (v, w) actor: they train and drive differential drives.
+        refuse_other_drives(robot, f"the policy {self.name!r}")
+        self.layout: ObservationLayout = make_layout(self.observation, robot, lidar, self.goal_distance_scale)
+        self.mapping = ActionMapping(robot, self.action_mapping)
+
+    def reset(self) -> None:
+        self.layout.reset()  # a layout with memory (lidar79_motion) starts the episode afresh
+
+    def observe(self, readings: Readings, goal: tuple[float, float]) -> np.ndarray:
+        obs = self.layout(readings, goal)
+        return self.normalizer(obs) if self.normalizer is not None else obs
+
+    def act(self, readings: Readings, goal: tuple[float, float]) -> tuple[float, float]:
+        action, _ = self.model.predict(self.observe(readings, goal), deterministic=True)
+        return self.mapping.to_velocity(action)
