@@ -443,6 +443,47 @@ def movers3d_figures(steps: int) -> dict[str, Any]:
             "physics3d_movers_vs_static": round(flat / static, 3)}
 
 
+SHIPPED_POLICIES = Path(__file__).resolve().parents[2] / "curricula" / "policies"
+
+
+def onnx_figures(calls: int = 20_000, policies: Sequence[str] = ("stage1_2d_ppo", "stage1_2d_sac")) -> dict[str, Any]:
+    """Actions per second of a shipped policy exported to ONNX (onnxruntime, one thread), against
+    the same policy's torch network (one thread), one observation per call as a robot's loop asks."""
+    import torch
+
+    from common.curriculum.onnx_export import export_onnx
+    from common.curriculum.onnx_policy import OnnxPolicy
+    from common.curriculum.policy import load_policy
+
+    figures: dict[str, Any] = {}
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        with tempfile.TemporaryDirectory() as folder:
+            for name in policies:
+                algorithm = name.rsplit("_", 1)[-1]
+                try:
+                    runtime = OnnxPolicy(export_onnx(SHIPPED_POLICIES / f"{name}.zip", Path(folder) / f"{name}.onnx"))
+                except (ConfigError, ImportError):  # no onnxruntime or onnxscript, or no shipped policies here
+                    figures.update({f"onnx_actions_per_s_{algorithm}": None, f"onnx_vs_torch_{algorithm}": None})
+                    continue
+                network = load_policy(SHIPPED_POLICIES / f"{name}.zip").model
+                observations = np.random.default_rng(0).uniform(-1, 1, (calls, runtime.size)).astype(np.float32)
+                rates = []
+                for predict in (runtime.predict, network.predict):
+                    predict(observations[0])  # warm-up
+                    began = time.perf_counter()
+                    for observation in observations:
+                        predict(observation, deterministic=True)
+                    rates.append(calls / (time.perf_counter() - began))
+                figures.update({f"onnx_actions_per_s_{algorithm}": round(rates[0], 1),
+                                f"torch_actions_per_s_{algorithm}": round(rates[1], 1),
+                                f"onnx_vs_torch_{algorithm}": round(rates[0] / rates[1], 2)})
+    finally:
+        torch.set_num_threads(threads)
+    return figures
+
+
 def run_benchmarks(steps: int = 20_000) -> dict[str, Any]:
     """All figures of this milestone, as one flat mapping."""
     scenario = bench_scenario()
@@ -469,6 +510,7 @@ def run_benchmarks(steps: int = 20_000) -> dict[str, Any]:
         "warehouse_env_steps_per_s": round(flatland_steps_per_s("warehouse", max(500, steps // 4)), 1),
         **movers_figures(max(1000, steps // 4)),
         **movers3d_figures(max(250, steps // 40)),
+        **onnx_figures(max(1000, steps)),
         **_ppo_figures(max(2048, steps)),
     }
 

@@ -117,12 +117,31 @@ def _eval(args: argparse.Namespace) -> int:
 
 
 def _policies(paths):
+    """Policy zips, and policies exported to ONNX (``.onnx``: run by onnxruntime, torch never loaded)."""
+    from common.curriculum.onnx_policy import load_onnx_policy
     from common.curriculum.policy_file import PolicyFile
 
-    files = [PolicyFile(path) for path in paths or []]  # a file that is no policy is refused before torch loads
+    paths = list(paths or [])
+    # Every file is opened (and a file that is no policy refused) before torch loads.
+    opened = [load_onnx_policy(path) if _is_onnx(path) else PolicyFile(path) for path in paths]
+    if all(_is_onnx(path) for path in paths):
+        return opened
     from common.curriculum.policy import load_policy
 
-    return [load_policy(file) for file in files]
+    return [agent if _is_onnx(path) else load_policy(agent) for path, agent in zip(paths, opened)]
+
+
+def _is_onnx(path) -> bool:
+    return str(path).lower().endswith(".onnx")
+
+
+def _export(args: argparse.Namespace) -> int:
+    from common.curriculum.onnx_export import export_onnx
+
+    out = export_onnx(args.policy, args.onnx)
+    print(f"wrote {out} ({out.stat().st_size:,} bytes): input 'observation', output 'action' in [-1, 1]; "
+          "its metadata holds the policy's manifest (docs/deploy.md)")
+    return 0
 
 
 def _bench(args: argparse.Namespace) -> int:
@@ -212,10 +231,11 @@ def _agent(spec: str):
     """``--agent``: a controller name or a policy zip."""
     from common.controllers import CONTROLLERS
 
-    if spec.endswith(".zip") or Path(spec).is_file():
+    if spec.endswith(".zip") or _is_onnx(spec) or Path(spec).is_file():
         return _policies([spec])[0]
     if spec not in CONTROLLERS:
-        raise ConfigError(None, "--agent", f"{spec!r} is neither a controller ({', '.join(CONTROLLERS)}) nor a policy .zip")
+        raise ConfigError(None, "--agent", f"{spec!r} is neither a controller ({', '.join(CONTROLLERS)}) nor a policy "
+                          ".zip or .onnx")
     return _controllers(spec, "--agent")[0]
 
 
@@ -436,7 +456,7 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.set_defaults(handler=_sweep)
 
     evaluate = commands.add_parser("eval", help="evaluate trained policies on a suite or a scenario file")
-    evaluate.add_argument("--policy", nargs="+", required=True, metavar="ZIP")
+    evaluate.add_argument("--policy", nargs="+", required=True, metavar="ZIP|ONNX")
     _add_scenario_source(evaluate, episodes=100)
     evaluate.add_argument("--json", action="store_true",
                           help="print {success_rate, collision_rate, timeout_rate, spl, mean_steps, mean_path_length, episodes}")
@@ -458,7 +478,7 @@ def build_parser() -> argparse.ArgumentParser:
     compare = commands.add_parser("compare", help="run agents on the same scenarios; Markdown, CSV, PNG and JSON")
     _add_scenario_source(compare, episodes=20)
     compare.add_argument("--controllers", metavar="A,B,...", help="controllers to compare (default: all)")
-    compare.add_argument("--policy", nargs="*", metavar="ZIP", help="trained policies to add as rows")
+    compare.add_argument("--policy", nargs="*", metavar="ZIP|ONNX", help="trained policies to add as rows")
     compare.add_argument("--out", metavar="DIR", help="output directory (default runs/compare/WORLD-SOURCE)")
     compare.add_argument("--gif", metavar="DIR", help="also record each agent's first episode as DIR/AGENT.gif")
     compare.add_argument("--json", action="store_true", help="print {agent: {success_rate, ...}} as JSON")
@@ -468,11 +488,17 @@ def build_parser() -> argparse.ArgumentParser:
     _add_scenario_source(render, episodes=None)
     render.add_argument("--index", type=_whole(0, 1_000_000), default=0,
                         help="which scenario of the suite or file draw (default 0)")
-    render.add_argument("--agent", default="pid_blend", help="a controller name or a policy zip (default pid_blend)")
+    render.add_argument("--agent", default="pid_blend",
+                        help="a controller name, a policy zip or an exported .onnx (default pid_blend)")
     render.add_argument("--out", default="episode.gif", help="the GIF to write (default episode.gif)")
     render.add_argument("--every", type=_whole(1, 1000), default=1, help="keep every k-th frame (default 1)")
     render.add_argument("--drift", metavar="PNG", help="also plot the true path against wheel odometry")
     render.set_defaults(handler=_render)
+
+    export = commands.add_parser("export", help="write a policy's actor as an ONNX file (run with onnxruntime alone)")
+    export.add_argument("policy", metavar="POLICY.zip")
+    export.add_argument("--onnx", required=True, metavar="OUT.onnx", help="the file to write")
+    export.set_defaults(handler=_export)
     return parser
 
 

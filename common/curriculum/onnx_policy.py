@@ -1,0 +1,131 @@
+"""A policy exported to ONNX (``curriculum export POLICY.zip --onnx OUT.onnx``), run with
+onnxruntime: no torch, no stable-baselines3 (``tests/test_onnx.py`` checks the import set).
+
+An exported file holds the policy's actor as one graph:
+
+* input ``observation``: float32 (batch, N), the observation layout its manifest names, raw (the
+  observation normaliser the policy trained with is folded into the graph);
+* output ``action``: float32 (batch, 2) in [-1, 1], the deterministic action (PPO's mean, SAC's
+  squashed mean, TD3's actor), which the manifest's ``action_mapping`` turns into (v, w)
+  (:mod:`common.actions`);
+* metadata: ``nav_manifest``, the policy zip's manifest (layout, goal distance scale, action
+  mapping, episode length, provenance), and ``nav_onnx``, what the export did (:data:`FORMAT`).
+
+Opening a file runs nothing in it (ONNX is a graph of standard operators, no code), reads at most
+:data:`MAX_ONNX_BYTES` and refuses in one line a file that is no ONNX model, lacks or garbles the
+metadata, or whose graph does not read and write the sizes its metadata promises.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pydantic import ValidationError
+
+from common.curriculum.policy_file import Manifest
+from common.errors import ConfigError
+from common.files import parse_json, read_bytes, size_text
+from common.observations import make_layout
+from common.policy_agent import PolicyAgent
+from common.scenario import LidarSpec, RobotProfile
+
+MANIFEST_KEY = "nav_manifest"
+EXPORT_KEY = "nav_onnx"
+FORMAT = 1
+INPUT, OUTPUT = "observation", "action"
+ACTION_SIZE = 2
+MAX_ONNX_BYTES = 64 * 1024 * 1024  # as a policy zip: a network of 16 M float32 parameters
+EXPECTED = "an ONNX policy written by `curriculum export`"
+
+
+def observation_size(manifest: Manifest) -> int:
+    """How many values the manifest's observation layout holds."""
+    return int(make_layout(manifest.observation, RobotProfile(), LidarSpec(), manifest.goal_distance_scale).space.shape[0])
+
+
+def export_metadata(raw_manifest: dict[str, Any], normalised: bool) -> dict[str, str]:
+    """The metadata an exported file carries (its keys and JSON values)."""
+    manifest = Manifest.model_validate(raw_manifest)
+    export = {"format": FORMAT, "observation_size": observation_size(manifest), "normaliser_folded_in": normalised,
+              "input": INPUT, "output": OUTPUT}
+    return {MANIFEST_KEY: json.dumps(raw_manifest), EXPORT_KEY: json.dumps(export)}
+
+
+class OnnxPolicy:
+    """An exported policy's actor, with SB3's ``predict`` call (so a :class:`PolicyAgent` drives it).
+
+    ``threads``: onnxruntime's threads for one call; 1 suits one observation per control period
+    (a batch of thousands gains from more).
+    """
+
+    def __init__(self, path: str | Path, threads: int = 1) -> None:
+        self.path = Path(path)
+        data = read_bytes(self.path, MAX_ONNX_BYTES, EXPECTED, too_large=f"larger than {size_text(MAX_ONNX_BYTES)}")
+        try:
+            import onnxruntime
+        except ImportError:
+            raise ConfigError(self.path, None, "running an ONNX policy needs onnxruntime: "
+                              "pip install 'nav-curriculum[onnx]'") from None
+        options = onnxruntime.SessionOptions()
+        options.intra_op_num_threads, options.inter_op_num_threads = threads, 1
+        options.log_severity_level = 3  # its warnings are ours to phrase
+        try:
+            # From bytes: a graph naming external weight files has no directory to find them in.
+            self._session = onnxruntime.InferenceSession(data, options, providers=["CPUExecutionProvider"])
+        except Exception as exc:  # onnxruntime raises its own Fail, InvalidGraph, InvalidProtobuf...
+            raise ConfigError(self.path, None, f"not an ONNX model onnxruntime can run ({type(exc).__name__}); "
+                              "refused") from None
+        metadata = self._session.get_modelmeta().custom_metadata_map
+        self.raw_manifest = self._json(metadata, MANIFEST_KEY)
+        try:
+            self.manifest = Manifest.model_validate(self.raw_manifest)
+        except ValidationError as exc:
+            from common.scenario import pydantic_error
+
+            error = pydantic_error(None, exc)
+            raise ConfigError(self.path, f"{MANIFEST_KEY}: {error.field}", error.problem) from None
+        export = self._json(metadata, EXPORT_KEY)
+        if export.get("format") != FORMAT:
+            raise ConfigError(self.path, f"{EXPORT_KEY}: format", f"{export.get('format')!r}; allowed: {FORMAT}")
+        self.size = observation_size(self.manifest)
+        self._check_signature()
+
+    def _json(self, metadata: dict[str, str], key: str) -> dict:
+        if key not in metadata:
+            raise ConfigError(self.path, key, f"missing from the metadata; not {EXPECTED}")
+        value = parse_json(metadata[key], self.path, key)
+        if not isinstance(value, dict):
+            raise ConfigError(self.path, key, "expected a JSON object")
+        return value
+
+    def _check_signature(self) -> None:
+        """One input of (batch, layout size), one output of (batch, 2), both float32."""
+        inputs, outputs = self._session.get_inputs(), self._session.get_outputs()
+        layout = f"{self.manifest.observation} layout"
+        for found, name, size, what in ((inputs, INPUT, self.size, f"the {layout}'s {self.size} values"),
+                                        (outputs, OUTPUT, ACTION_SIZE, f"{ACTION_SIZE} action values")):
+            shape = found[0].shape if len(found) == 1 and found[0].name == name else None
+            if shape is None or len(shape) != 2 or shape[1] != size or found[0].type != "tensor(float)":
+                got = ", ".join(f"{arg.name} {arg.type} {arg.shape}" for arg in found)
+                raise ConfigError(self.path, f"graph {name}", f"expected one float tensor {name!r} of (batch, {size}): "
+                                  f"{what}; the graph has {got}; refused")
+
+    def predict(self, observation: np.ndarray, deterministic: bool = True) -> tuple[np.ndarray, None]:
+        """The action for one observation (N,) or a batch (B, N), as SB3's ``predict`` returns it
+        (the actor is deterministic: ``deterministic`` is accepted for that call's sake)."""
+        obs = np.asarray(observation, dtype=np.float32)
+        single = obs.ndim == 1
+        actions = self._session.run(None, {INPUT: obs[None] if single else obs})[0]
+        return (actions[0] if single else actions), None
+
+
+def load_onnx_policy(path: str | Path, name: str | None = None, threads: int = 1) -> PolicyAgent:
+    """A :class:`PolicyAgent` running an exported policy: it observes and acts as the policy zip did."""
+    policy = OnnxPolicy(path, threads)
+    manifest = policy.manifest
+    return PolicyAgent(policy, manifest.observation, manifest.goal_distance_scale, None,
+                       name=name or Path(path).stem, action_mapping=manifest.action_mapping,
+                       max_steps=manifest.max_steps, env_kwargs=manifest.env_kwargs, home=manifest.home)

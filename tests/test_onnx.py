@@ -1,0 +1,203 @@
+"""Policies exported to ONNX: the exported actor acts as the policy does, a damaged or mismatched
+file is refused in one line, the runtime needs neither torch nor stable-baselines3, and the CLI
+scores an exported policy as it scores its zip (docs/deploy.md)."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from common.errors import ConfigError
+from tests.conftest import optional
+
+ROOT = Path(__file__).resolve().parents[1]
+SHIPPED = ROOT / "curricula" / "policies"
+OBSERVATIONS = 10_000
+TOLERANCE = 1e-5
+
+
+def _normalised_ppo(folder: Path) -> Path:
+    """An untrained PPO policy (lidar43_log) with a normaliser far from the identity, so a graph
+    without it, or with it applied wrongly, acts otherwise; its means reach past [-1, 1], where
+    ``predict`` clips."""
+    import gymnasium as gym
+    import torch
+    from stable_baselines3 import PPO
+
+    import flatland  # noqa: F401
+    from common.curriculum.policy_file import Normalizer, save_policy
+
+    env = gym.make("flatland/Nav-v0", world="sparse", observation="lidar43_log")
+    model = PPO("MlpPolicy", env, n_steps=64, batch_size=64, device="cpu", seed=0)
+    with torch.no_grad():  # PPO's last layer starts near zero (gain 0.01): make its actions span [-1, 1], past it
+        model.policy.action_net.weight.mul_(300.0)
+    rng = np.random.default_rng(1)
+    size = env.observation_space.shape[0]
+    normalizer = Normalizer(rng.normal(0.0, 0.4, size), rng.uniform(0.0, 0.5, size), 3.0, 0.01, 1000.0)
+    return save_policy(model, folder / "normalised_ppo.zip",
+                       {"algorithm": "ppo", "observation": "lidar43_log", "goal_distance_scale": 10.0}, normalizer)
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    """name -> (policy zip, its ONNX export)."""
+    optional("onnxruntime")
+    from common.curriculum.onnx_export import export_onnx
+
+    folder = tmp_path_factory.mktemp("onnx")
+    zips = {name: SHIPPED / f"{name}.zip" for name in ("stage1_2d_ppo", "stage1_2d_sac", "stage1_2d_td3")}
+    zips["normalised_ppo"] = _normalised_ppo(folder)
+    return {name: (path, export_onnx(path, folder / f"{name}.onnx")) for name, path in zips.items()}
+
+
+def _episode_observations(agent, count: int) -> np.ndarray:
+    """Raw observations (before any normaliser) of ``agent`` driving held-out sparse episodes."""
+    from common.generators import generate
+    from flatland.world import World
+
+    observations = []
+    seed = 0
+    while len(observations) < count:
+        scenario = generate("sparse", seed, split="eval")
+        world = World(scenario, seed=seed)
+        readings = world.reset()
+        agent.bind(scenario.robot, scenario.lidar)
+        agent.reset()
+        for _ in range(300):
+            observations.append(agent.layout(readings, scenario.goal).copy())
+            readings = world.step(*agent.act(readings, scenario.goal))
+            if readings.collided or math.dist(readings.pose[:2], scenario.goal) < 0.1:
+                break
+        seed += 1
+    return np.array(observations[:count], dtype=np.float32)
+
+
+@pytest.mark.parametrize("name", ["stage1_2d_ppo", "stage1_2d_sac", "stage1_2d_td3", "normalised_ppo"])
+def test_the_onnx_actor_acts_as_the_policy_over_10000_observations_of_real_episodes(exported, name):
+    import torch
+
+    from common.curriculum.onnx_policy import load_onnx_policy
+    from common.curriculum.policy import load_policy
+
+    zip_path, onnx_path = exported[name]
+    runtime = load_onnx_policy(onnx_path)
+    observations = _episode_observations(runtime, OBSERVATIONS)
+    policy = load_policy(zip_path)
+    inputs = observations if policy.normalizer is None else np.stack([policy.normalizer(o) for o in observations])
+    with torch.no_grad():
+        theirs, _ = policy.model.predict(inputs, deterministic=True)
+    ours, _ = runtime.model.predict(observations)
+    assert ours.shape == theirs.shape == (OBSERVATIONS, 2)
+    assert np.abs(ours - theirs).max() <= TOLERANCE
+    assert np.ptp(theirs, axis=0).min() > 0.1  # the episodes made the policy act, not sit at one action
+
+
+def test_the_file_carries_the_policy_manifest_and_what_the_export_did(exported):
+    from common.curriculum.onnx_policy import OnnxPolicy
+    from common.curriculum.policy_file import PolicyFile
+
+    zip_path, onnx_path = exported["normalised_ppo"]
+    runtime = OnnxPolicy(onnx_path)
+    assert runtime.raw_manifest == PolicyFile(zip_path).raw_manifest
+    assert runtime.size == 43 and runtime.manifest.observation == "lidar43_log"
+
+
+def _rewritten(source: Path, target: Path, change) -> Path:
+    """The ONNX file with its model protobuf changed by ``change``."""
+    onnx = optional("onnx")
+    model = onnx.load_from_string(source.read_bytes())
+    change(model)
+    target.write_bytes(model.SerializeToString())
+    return target
+
+
+def _set_metadata(key: str, value: str | None):
+    def change(model) -> None:
+        kept = [(entry.key, entry.value) for entry in model.metadata_props if entry.key != key]
+        del model.metadata_props[:]
+        for k, v in kept + ([(key, value)] if value is not None else []):
+            entry = model.metadata_props.add()
+            entry.key, entry.value = k, v
+    return change
+
+
+def _other_layout(model) -> None:
+    """The manifest says nav7 (7 values) over a graph that reads 43."""
+    manifest = json.loads(next(e.value for e in model.metadata_props if e.key == "nav_manifest"))
+    _set_metadata("nav_manifest", json.dumps({**manifest, "observation": "nav7"}))(model)
+
+
+@pytest.mark.parametrize(("case", "make", "field", "problem"), [
+    ("truncated", lambda source, target: target.write_bytes(source.read_bytes()[:5000]) and target, None,
+     "not an ONNX model onnxruntime can run"),
+    ("not ONNX", lambda source, target: target.write_bytes(b"hello, robot\n" * 100) and target, None,
+     "not an ONNX model onnxruntime can run"),
+    ("no manifest", lambda source, target: _rewritten(source, target, _set_metadata("nav_manifest", None)),
+     "nav_manifest", "missing from the metadata"),
+    ("garbled manifest", lambda source, target: _rewritten(source, target, _set_metadata("nav_manifest", "{oops")),
+     "nav_manifest", "not valid JSON"),
+    ("unknown format", lambda source, target: _rewritten(source, target, _set_metadata("nav_onnx", '{"format": 9}')),
+     "nav_onnx: format", "allowed: 1"),
+    ("another layout", lambda source, target: _rewritten(source, target, _other_layout), "graph observation",
+     "expected one float tensor 'observation' of (batch, 7)"),
+])
+def test_a_damaged_or_mismatched_onnx_file_is_refused_in_one_line(exported, tmp_path, case, make, field, problem):
+    from common.curriculum.onnx_policy import OnnxPolicy
+
+    _, source = exported["stage1_2d_ppo"]
+    path = make(source, tmp_path / "bad.onnx")
+    with pytest.raises(ConfigError) as error:
+        OnnxPolicy(path)
+    assert error.value.field == field and problem in error.value.problem, str(error.value)
+    assert "\n" not in str(error.value)
+
+
+def test_the_cli_exports_scores_the_onnx_file_as_the_zip_and_refuses_bad_input_with_exit_2(exported, tmp_path, capsys):
+    from common.curriculum.cli import main
+
+    zip_path = SHIPPED / "stage1_2d_ppo.zip"
+    out = tmp_path / "main.onnx"
+    assert main(["export", str(zip_path), "--onnx", str(out)]) == 0
+    scores = []
+    for policy in (zip_path, out):
+        capsys.readouterr()
+        assert main(["eval", "--policy", str(policy), "--suite", "sparse", "--episodes", "6", "--json"]) == 0
+        scores.append(json.loads(capsys.readouterr().out))
+    # The same outcomes and steps; lengths within what actions 1e-6 apart move a robot.
+    exact = ("episodes", "success_rate", "success_ci95", "collision_rate", "timeout_rate", "mean_steps")
+    assert scores[0]["episodes"] == 6 and [scores[0][key] for key in exact] == [scores[1][key] for key in exact]
+    for key in ("spl", "mean_path_length"):
+        assert scores[0][key] == pytest.approx(scores[1][key], rel=1e-5)
+    for argv in (["export", str(ROOT / "README.md"), "--onnx", str(tmp_path / "x.onnx")],
+                 ["export", str(zip_path), "--onnx", str(tmp_path / "x.zip")],
+                 ["eval", "--policy", str(ROOT / "README.md") + ".onnx"]):
+        assert main(argv) == 2
+        assert capsys.readouterr().err.count("\n") == 1
+    assert not (tmp_path / "x.onnx").exists()
+
+
+def _example_loop() -> str:
+    text = (ROOT / "docs" / "deploy.md").read_text()
+    return re.search(r"## An example loop.*?```python\n(.*?)```", text, re.S).group(1)
+
+
+def test_the_documented_robot_loop_runs_on_onnxruntime_alone_and_arrives(exported, tmp_path):
+    _, onnx_path = exported["stage1_2d_ppo"]
+    script = tmp_path / "example.py"
+    script.write_text(_example_loop() + "\nprint('MODULES', ' '.join(sorted(sys.modules)))\n")
+    result = subprocess.run([sys.executable, str(script), str(onnx_path)], capture_output=True, text=True,
+                            cwd=tmp_path, timeout=300, check=True)
+    lines = result.stdout.splitlines()
+    loaded = set(lines[-1].split()[1:])
+    assert "onnxruntime" in loaded
+    assert not {m for m in loaded if m.split(".")[0] in ("torch", "stable_baselines3", "pymunk", "pybullet")}
+    assert lines[-2] == "arrived"
+    commands = [line for line in lines if line.startswith("t=")]
+    assert 20 < len(commands) < 100  # it drove, and arrived before the loop ran out
