@@ -57,8 +57,8 @@ def _third_party_imports() -> set[str]:
 
 
 # Imported only inside optional paths, each under its extra: the IR-SIM comparison in `curriculum bench`,
-# and `curriculum sweep`.
-OPTIONAL = {"irsim": "irsim", "ray": "sweep", "optuna": "sweep"}
+# `curriculum sweep`, and ONNX policies (torch's exporter imports onnx and onnxscript itself).
+OPTIONAL = {"irsim": "irsim", "ray": "sweep", "optuna": "sweep", "onnxruntime": "onnx"}
 
 
 def test_optional_imports_are_declared_by_their_extra():

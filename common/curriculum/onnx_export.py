@@ -10,6 +10,7 @@ onnxscript's translation); the batch dimension stays free.
 from __future__ import annotations
 
 import contextlib
+import importlib.util
 import io
 import logging
 import warnings
@@ -56,6 +57,10 @@ def export_onnx(policy_path: str | Path, out_path: str | Path) -> Path:
     out_path = Path(out_path)
     if out_path.suffix != ".onnx":
         raise ConfigError(None, "--onnx", f"{str(out_path)!r}: expected a file name ending in .onnx")
+    missing = [name for name in ("onnx", "onnxscript") if importlib.util.find_spec(name) is None]
+    if missing:
+        raise ConfigError(None, "--onnx", f"exporting needs {' and '.join(missing)} (torch's exporter): "
+                          "pip install 'nav-curriculum[onnx]'")
     file = PolicyFile(policy_path)
     raw_manifest = dict(file.raw_manifest)
     agent = load_policy(file)
