@@ -31,6 +31,9 @@ knob               meaning                                                  flat
 ``accel_noise``    σ of each accelerometer reading, m/s²                     (3D only)  0.05
 =================  ======================================================  =========  ===========
 
+IR-SIM as a world (``--world irsim``, for evaluation) takes ``robot``, ``lidar_noise`` and
+``lidar_beams`` and refuses the rest (:data:`NOT_IN_IRSIM`).
+
 A world takes its conditions whole (``World(scenario, seed, conditions)``), fills the tier's
 defaults (:meth:`Conditions.for_tier`) and, at every reset, draws the episode's values with
 :meth:`Conditions.draw`, in the order that method fixes. Adding a knob is a field here (with its
@@ -65,13 +68,18 @@ Steps = Annotated[int, Field(ge=0, le=20)]
 HeadingSource = Literal["wheels", "gyro"]
 ONLY_3D = ("friction", "mass_scale", "control_period", "heading_source", "gyro_noise", "gyro_bias", "accel_noise")
 ONLY_2D = ("dynamics",)
+# IR-SIM as a world (``--world irsim``) moves its robot by its own kinematics and senses with its own
+# lidar: it takes the robot and the lidar's beams and noise, and nothing that needs wheels or time.
+NOT_IN_IRSIM = (*ONLY_3D, *ONLY_2D, "odometry_noise", "action_delay", "motor_scale")
 
 TIER_DEFAULTS: dict[str, dict[str, Any]] = {
     "flatland": {"action_delay": 0, "dynamics": "kinematic"},
     "physics3d": {"robot": "physics3d", "lidar_noise": 0.01, "odometry_noise": 0.01, "action_delay": 0,
                   "motor_scale": (0.95, 1.05), "friction": (0.8, 1.2), "mass_scale": (0.9, 1.1),
                   "heading_source": "gyro", "gyro_noise": 0.005, "gyro_bias": 0.0005, "accel_noise": 0.05},
+    "irsim": {},
 }
+_NOT_IN = {"flatland": ONLY_3D, "physics3d": ONLY_2D, "irsim": NOT_IN_IRSIM}
 
 
 class EpisodeDraw(NamedTuple):
@@ -136,7 +144,7 @@ class Conditions(BaseModel):
         """These conditions with the tier's defaults filled in. A knob of the other tier is an error,
         or with ``strict=False`` dropped (a 2D policy's wheel dynamics mean nothing in 3D, where
         physics supplies them)."""
-        wrong = ONLY_3D if tier == "flatland" else ONLY_2D
+        wrong = _NOT_IN[tier]
         given = self.model_dump(exclude_none=True)
         for knob in wrong:
             if knob in given and strict:

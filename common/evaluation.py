@@ -14,6 +14,7 @@ who moved into whom (``robot`` or ``mover``: who closed in faster; see :class:`c
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 from dataclasses import asdict, dataclass, field
@@ -138,25 +139,27 @@ def run_episode(
     readings (e.g. to render). ``max_steps`` defaults to the agent's own (see :func:`episode_limit`)."""
     task = Task(goal_radius, episode_limit(agent, max_steps), judge_stuck=True)
     world = make_world(tier, scenario, seed=seed, conditions=conditions)
-    scenario = world.scenario  # as conditioned: the robot the agent drives, its sensors' noise
-    readings = world.reset(seed=seed)
-    task.start(scenario, readings)
-    agent.bind(scenario.robot, scenario.lidar, task.radius)
-    agent.reset()
-    social = SocialRecord(scenario.robot)
-    social(readings)
-    if on_step:
-        on_step(readings)
-    outcome = None
-    start = time.perf_counter()
-    while outcome is None:
-        v, w = agent.act(readings, scenario.goal)
-        readings = world.step(v, w)
+    # A world holding a simulator's resources (a PyBullet client, IR-SIM's figure) lets them go at the end.
+    with contextlib.closing(world) if hasattr(world, "close") else contextlib.nullcontext():
+        scenario = world.scenario  # as conditioned: the robot the agent drives, its sensors' noise
+        readings = world.reset(seed=seed)
+        task.start(scenario, readings)
+        agent.bind(scenario.robot, scenario.lidar, task.radius)
+        agent.reset()
+        social = SocialRecord(scenario.robot)
         social(readings)
         if on_step:
             on_step(readings)
-        outcome = task.step(readings)
-    wall = time.perf_counter() - start
+        outcome = None
+        start = time.perf_counter()
+        while outcome is None:
+            v, w = agent.act(readings, scenario.goal)
+            readings = world.step(v, w)
+            social(readings)
+            if on_step:
+                on_step(readings)
+            outcome = task.step(readings)
+        wall = time.perf_counter() - start
     shortest = shortest_path_length(scenario, task.radius) if shortest is None else shortest
     travelled = task.travelled
     spl = shortest / max(shortest, travelled) if outcome == "success" and shortest > 0 else float(outcome == "success")

@@ -64,6 +64,16 @@ def _image_occupancy(path: str) -> np.ndarray:
     return np.fliplr((100 * (1 - grid.astype(np.float64))).T)
 
 
+def write_occupancy_image(occupied: np.ndarray, path: str | Path) -> Path:
+    """An 8-bit grey PNG that :func:`_image_occupancy` (IR-SIM's reading) reads back as ``occupied``
+    (bool, indexed [x, y]): black where occupied, white where free."""
+    from PIL import Image
+
+    grey = 1.0 - np.fliplr(np.asarray(occupied, dtype=np.float64)).T  # the inverse of the reading's fliplr and .T
+    Image.fromarray(np.round(255 * grey).astype(np.uint8), mode="L").save(path)
+    return Path(path)
+
+
 def maze_occupancy(seed: int, width: float, height: float, resolution: float, passage: float,
                    loops: float) -> np.ndarray:
     """A maze drawn from ``seed`` (0-100 occupancy, indexed [x, y]): rooms ``passage`` m wide on a

@@ -21,16 +21,21 @@ class WorldLike(Protocol):
     def step(self, v: float, w: float) -> Readings: ...
 
 
-_WORLDS = {"flatland": "flatland.world:World", "physics3d": "physics3d.world:World"}
+_WORLDS = {"flatland": "flatland.world:World", "physics3d": "physics3d.world:World",
+           "irsim": "common.curriculum.irsim_world:IrsimWorld"}
 # What each tier's generator kinds draw scenarios around (flatland: the defaults of Scenario).
-_TEMPLATES = {"flatland": "common.scenario:Scenario", "physics3d": "physics3d.robot:TEMPLATE"}
-TIERS = tuple(_WORLDS)
+_TEMPLATES = {"flatland": "common.scenario:Scenario", "physics3d": "physics3d.robot:TEMPLATE",
+              "irsim": "common.scenario:Scenario"}
+TIERS = ("flatland", "physics3d")  # the tiers this project trains in
+# Where agents are evaluated: the tiers, and IR-SIM itself (an optional extra), run with the same
+# scenarios and metrics to tell navigation learnt from flatland learnt.
+WORLDS = (*TIERS, "irsim")
 
 
 def _load(tier: str, table: dict[str, str]) -> Any:
     """The object a tier's entry in ``table`` names ("module:attribute"), imported now."""
     if tier not in table:
-        raise ConfigError(None, "world", f"unknown tier {quote(tier)}; allowed: {', '.join(TIERS)}")
+        raise ConfigError(None, "world", f"unknown tier {quote(tier)}; allowed: {', '.join(WORLDS)}")
     module_name, name = table[tier].split(":")
     try:
         return getattr(importlib.import_module(module_name), name)

@@ -6,9 +6,7 @@ later milestones extend (planner timings, the 3D tier).
 
 from __future__ import annotations
 
-import contextlib
 import os
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -18,6 +16,8 @@ import numpy as np
 import yaml
 
 from common.actions import ActionMapping
+from common.curriculum.irsim_world import import_irsim
+from common.curriculum.stdout import stdout_to_stderr
 from common.errors import ConfigError
 from common.generators import SUITES
 from common.occupancy import OccupancyGrid, scenario_grid
@@ -60,38 +60,12 @@ def _timed_random_drive(env, actions: np.ndarray, seed: int) -> float:
     return time.perf_counter() - start
 
 
-@contextlib.contextmanager
-def _stdout_to_stderr():
-    """Keep stdout for our JSON: what Python code prints (IR-SIM probing its GUI backends on
-    import) and what C libraries write to descriptor 1 (PyBullet's GUI) goes to stderr."""
-    sys.stdout.flush()
-    saved = os.dup(1)
-    os.dup2(2, 1)
-    try:
-        with contextlib.redirect_stdout(sys.stderr):
-            yield
-    finally:
-        os.dup2(saved, 1)
-        os.close(saved)
-
-
-def _import_irsim():
-    """IR-SIM, or None where it is not installed."""
-    os.environ.setdefault("MPLBACKEND", "Agg")
-    try:
-        with _stdout_to_stderr():
-            import irsim
-    except ImportError:
-        return None
-    return irsim
-
-
 def irsim_steps_per_s(world: Scenario | Path, robot: RobotProfile | None = None, steps: int = 2_000,
                       seed: int = 0) -> float | None:
     """IR-SIM's steps per second on the same world (a scenario, exported, or an IR-SIM world file;
     headless, same lidar), under the random actions flatland gets mapped to the same velocities,
     reset on collision or arrival as the env does; None without IR-SIM."""
-    irsim = _import_irsim()
+    irsim = import_irsim()
     if irsim is None:
         return None
     from common.irsim_export import scenario_to_irsim
@@ -145,7 +119,7 @@ with the circle world's robot limits and lidar."""
 def irsim_grid_world_figures(steps: int) -> dict[str, Any]:
     """Flatland against IR-SIM on IR-SIM's Perlin grid map (IR-SIM's generator builds it for both:
     without IR-SIM there is no figure)."""
-    if _import_irsim() is None:
+    if import_irsim() is None:
         return {"grid_flatland_steps_per_s": None, "grid_irsim_steps_per_s": None, "grid_flatland_vs_irsim": None}
     return _irsim_file_figures("grid", GRID_WORLD, steps)
 
@@ -291,7 +265,7 @@ def gui_figures(steps: int = 300, seed: int = 0) -> dict[str, float]:
     figures: dict[str, float] = {}
     worlds = (("gui", physics3d_bench_scenario()), ("gui_movers", moving_bench_scenario(people=10, template=TEMPLATE)))
     actions = np.random.default_rng(seed).uniform(-1.0, 1.0, (steps, 2)).astype(np.float32)
-    with _stdout_to_stderr():
+    with stdout_to_stderr():
         for name, world in worlds:  # one GUI window a process: one env at a time
             env = gym.make("physics3d/WarehouseNav-v0", world=world, observation="lidar43", render_mode="human")
             elapsed = _timed_random_drive(env, actions, seed)

@@ -357,10 +357,11 @@ def _stderr_console():
 def _add_scenario_source(parser: argparse.ArgumentParser, episodes: int | None) -> None:
     """--world, --suite | --scenario-file, --seed, --max-steps, and --episodes unless ``episodes`` is None."""
     from common.generators import SUITES
-    from common.tiers import TIERS
+    from common.tiers import WORLDS
 
-    parser.add_argument("--world", choices=TIERS,
-                        help="the tier (default: where a policy's own test figure was measured, else flatland)")
+    parser.add_argument("--world", choices=WORLDS,
+                        help="the tier, or irsim: IR-SIM itself, the [irsim] extra (default: where a policy's own "
+                             "test figure was measured, else flatland)")
     source = parser.add_mutually_exclusive_group()
     source.add_argument("--suite", choices=sorted(SUITES),
                         help="a named suite (default: a policy's own test suite, else sparse)")

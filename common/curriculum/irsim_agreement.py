@@ -1,0 +1,66 @@
+"""Does a policy drive IR-SIM as it drives flatland? Each shipped 2D policy on the same held-out
+episodes in both worlds, under the same conditions (the policy's own, less the knobs IR-SIM
+cannot model), judged within its trained radius; success with Wilson intervals, and the
+episodes whose outcomes differ.
+
+    python -m common.curriculum.irsim_agreement [--episodes 200] [--suites sparse,cluttered] [--policy ZIP ...]
+
+prints a Markdown table (docs/deploy.md#policies-in-ir-sim-itself quotes it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Sequence
+
+from common.conditions import Conditions, conditions_of
+from common.curriculum.policy import load_policy
+from common.evaluation import Summary, evaluate
+from common.generators import get_suite
+from common.task import judged_radius
+
+SHIPPED = Path(__file__).resolve().parents[2] / "curricula" / "policies"
+SHIPPED_2D = ("stage1_2d_ppo", "stage1_2d_sac", "stage1_2d_td3", "curriculum_2d_ppo", "curriculum_2d_sac",
+              "cluttered_2d_sac", "moving_2d_sac")
+
+
+def compare_worlds(policy_path: str | Path, suite: str, episodes: int, seed: int = 0) -> dict[str, Summary]:
+    """The policy's summaries in flatland and in IR-SIM on the suite's first ``episodes`` held-out scenarios."""
+    agent = load_policy(policy_path)
+    # The knobs IR-SIM cannot model (delays, wheel dynamics) are dropped for both worlds alike.
+    shared = Conditions.parse(conditions_of(agent.env_kwargs).for_tier("irsim", strict=False).given())
+    scenarios = list(get_suite(suite).scenarios(count=episodes, seed=seed))
+    radius = judged_radius(agent.env_kwargs)
+    return {world: evaluate([agent], scenarios, world, seed=seed, conditions=shared, goal_radius=radius)[0]
+            for world in ("flatland", "irsim")}
+
+
+def _rate(summary: Summary) -> str:
+    low, high = summary.success_ci95
+    return f"{100 * summary.success_rate:.1f}% ({100 * low:.1f}–{100 * high:.1f})"
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m common.curriculum.irsim_agreement", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--episodes", type=int, default=200)
+    parser.add_argument("--suites", default="sparse,cluttered")
+    parser.add_argument("--policy", nargs="*", metavar="ZIP", help="default: the shipped 2D policies")
+    args = parser.parse_args(argv)
+    policies = args.policy or [str(SHIPPED / f"{name}.zip") for name in SHIPPED_2D]
+    print("| policy | suite | flatland success (95% CI) | IR-SIM success (95% CI) | difference, points "
+          "| episodes with another outcome |")
+    print("|---|---|---:|---:|---:|---:|")
+    for path in policies:
+        for suite in args.suites.split(","):
+            result = compare_worlds(path, suite, args.episodes)
+            flat, irsim = result["flatland"], result["irsim"]
+            differ = sum(a.outcome != b.outcome for a, b in zip(flat.rows, irsim.rows))
+            print(f"| {Path(path).stem} | {suite} | {_rate(flat)} | {_rate(irsim)} | "
+                  f"{100 * (irsim.success_rate - flat.success_rate):+.1f} | {differ} |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
