@@ -180,3 +180,14 @@ def scenario_to_irsim(scenario: Scenario) -> dict[str, Any]:
         "robot": [robot_entry, *robots],
         "obstacle": obstacles,
     }
+
+
+def fixed_routes(scenario: Scenario, count: int | None = None) -> Scenario:
+    """The scenario with its people (the first ``count``, default all) each planning alone and
+    walking back and forth to their first goal: a crowd both simulators move alike (a wanderer's
+    next goals are drawn by each simulator from its own generator; a group plans as one)."""
+    people = []
+    for person in scenario.movers[:count]:
+        motion = person.motion.model_copy(update={"group": None, "wander": None, "route": "back_and_forth"})
+        people.append(person.model_copy(update={"motion": motion}))
+    return scenario.model_copy(update={"obstacles": [*scenario.static_obstacles, *people]})

@@ -9,25 +9,15 @@ import yaml
 from common.drive import channel_limits
 from common.errors import ConfigError
 from common.generators import generate
-from common.irsim_export import scenario_to_irsim
+from common.irsim_export import fixed_routes, scenario_to_irsim
 from common.irsim_format import parse_irsim
 from common.motion.spec import Dash, Motion, Orca, Sfm
 from common.scenario import CircleObstacle, FootprintPart, RobotProfile
 from tests.conftest import optional
 
 
-def fixed_routes(scenario, count: int = 8):
-    """A crowd whose people each plan alone and walk back and forth to their first goal (a
-    wanderer's next goals are drawn by each simulator from its own generator)."""
-    people = []
-    for person in scenario.movers[:count]:
-        motion = person.motion.model_copy(update={"group": None, "wander": None, "route": "back_and_forth"})
-        people.append(person.model_copy(update={"motion": motion}))
-    return scenario.model_copy(update={"obstacles": [*scenario.static_obstacles, *people]})
-
-
 def test_movers_read_back_from_their_irsim_file(tmp_path):
-    scenario = fixed_routes(generate("crowd", 2, 0.5, "eval", behavior="sfm"))
+    scenario = fixed_routes(generate("crowd", 2, 0.5, "eval", behavior="sfm"), count=8)
     back = parse_irsim(scenario_to_irsim(scenario), source=tmp_path / "w.yaml")
     ours, theirs = scenario.movers, back.movers
     assert [(p.x, p.y, p.radius) for p in ours] == [(p.x, p.y, p.radius) for p in theirs]
@@ -62,7 +52,8 @@ def test_an_exported_crowd_moves_in_irsim_as_in_flatland(tmp_path):
     import flatland
 
     path = tmp_path / "crowd.yaml"
-    path.write_text(yaml.safe_dump(scenario_to_irsim(fixed_routes(generate("crowd", 2, 0.5, "eval", behavior="sfm")))))
+    crowd = fixed_routes(generate("crowd", 2, 0.5, "eval", behavior="sfm"), count=8)
+    path.write_text(yaml.safe_dump(scenario_to_irsim(crowd)))
     world, env = flatland.load_world(path), irsim.make(str(path), display=False, log_level="ERROR")
     world.reset()
     try:

@@ -5,6 +5,10 @@ episodes whose outcomes differ.
 
     python -m common.curriculum.irsim_agreement [--episodes 200] [--suites sparse,cluttered] [--policy ZIP ...]
 
+``--suites`` takes any suite, and ``crowd_sfm``: the crowd suite's people under the social force,
+each on a fixed back-and-forth route (:func:`common.irsim_export.fixed_routes`), which IR-SIM
+moves as flatland does.
+
 prints a Markdown table (docs/deploy.md#policies-in-ir-sim-itself quotes it).
 """
 
@@ -18,7 +22,8 @@ from typing import Sequence
 from common.conditions import Conditions, conditions_of
 from common.curriculum.policy import load_policy
 from common.evaluation import Summary, evaluate
-from common.generators import get_suite
+from common.generators import Suite, get_suite
+from common.irsim_export import fixed_routes
 from common.task import judged_radius
 
 SHIPPED = Path(__file__).resolve().parents[2] / "curricula" / "policies"
@@ -26,12 +31,23 @@ SHIPPED_2D = ("stage1_2d_ppo", "stage1_2d_sac", "stage1_2d_td3", "curriculum_2d_
               "cluttered_2d_sac", "moving_2d_sac")
 
 
+# The crowd both simulators move alike: people under the social force (IR-SIM's group sees the
+# robot as the suite's people do), each walking back and forth on its own route.
+CROWD_SFM = Suite(name="crowd_sfm", kind="crowd", options=(("reacting", True), ("behavior", "sfm")))
+
+
+def _scenarios(suite: str, count: int, seed: int):
+    if suite == CROWD_SFM.name:
+        return (fixed_routes(scenario) for scenario in CROWD_SFM.scenarios(count=count, seed=seed))
+    return get_suite(suite).scenarios(count=count, seed=seed)
+
+
 def compare_worlds(policy_path: str | Path, suite: str, episodes: int, seed: int = 0) -> dict[str, Summary]:
     """The policy's summaries in flatland and in IR-SIM on the suite's first ``episodes`` held-out scenarios."""
     agent = load_policy(policy_path)
     # The knobs IR-SIM cannot model (delays, wheel dynamics) are dropped for both worlds alike.
     shared = Conditions.parse(conditions_of(agent.env_kwargs).for_tier("irsim", strict=False).given())
-    scenarios = list(get_suite(suite).scenarios(count=episodes, seed=seed))
+    scenarios = list(_scenarios(suite, episodes, seed))
     radius = judged_radius(agent.env_kwargs)
     return {world: evaluate([agent], scenarios, world, seed=seed, conditions=shared, goal_radius=radius)[0]
             for world in ("flatland", "irsim")}
@@ -45,7 +61,7 @@ def _rate(summary: Summary) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m common.curriculum.irsim_agreement", description=__doc__.split("\n\n")[0])
     parser.add_argument("--episodes", type=int, default=200)
-    parser.add_argument("--suites", default="sparse,cluttered")
+    parser.add_argument("--suites", default="sparse,cluttered", help="comma-separated suites, or crowd_sfm")
     parser.add_argument("--policy", nargs="*", metavar="ZIP", help="default: the shipped 2D policies")
     args = parser.parse_args(argv)
     policies = args.policy or [str(SHIPPED / f"{name}.zip") for name in SHIPPED_2D]
