@@ -20,11 +20,12 @@ from common import moving_kinds
 from common.layouts import CIRCLE_ANY, CIRCLE_NEAR, CRATE, MIXED_ANY, MIXED_NEAR, PILLAR, SHELF, Layout, Step, lay_out
 from common.grid_maps import GridMap, maze_rooms
 from common.occupancy import goal_reachable, path_exists, shapes_grid
+from common.passages import passages
 from common.placement import CIRCLE
 from common.scenario import BoxObstacle, CircleObstacle, Obstacle, Scenario
 
 Split = Literal["train", "eval"]
-KINDS = ("open", "sparse", "cluttered", "warehouse", "trap", "crowd", "warehouse_moving", "maze")
+KINDS = ("open", "sparse", "cluttered", "warehouse", "trap", "crowd", "warehouse_moving", "maze", "passages")
 MOVING_KINDS = ("crowd", "warehouse_moving")
 _SPLIT_IDS = {"train": 0, "eval": 1}
 _MAX_ATTEMPTS = 200
@@ -149,6 +150,7 @@ def _checked(template: Scenario, start: tuple, goal: tuple, obstacles: list[Obst
 _GENERATORS: dict[str, Callable[..., tuple | None]] = {
     "open": _open, "sparse": _sparse, "cluttered": _cluttered, "warehouse": _warehouse, "trap": _trap,
     "crowd": moving_kinds.crowd, "warehouse_moving": moving_kinds.warehouse_moving, "maze": _maze,
+    "passages": passages,
 }
 OPTIONS = ("reacting", "behavior")  # what a moving kind's variants may set
 

@@ -62,7 +62,7 @@ def test_generators_are_deterministic_and_seed_sensitive(kind):
 # obstacle changes a digest: then re-measure docs/benchmarks.md and update these on purpose.
 SUITE_DIGESTS = {"open": "7dd5a0357ca22cea", "sparse": "f6460bdee89d46da", "cluttered": "096ce43262819b31",
                  "warehouse": "08dabd76ddf8a343", "trap": "565ea0984c189ebc", "crowd": "d2cafbbb605271fa",
-                 "warehouse_moving": "6b50efbdb4c008a1", "maze": "00ccff5f1abbcd01"}
+                 "warehouse_moving": "6b50efbdb4c008a1", "maze": "00ccff5f1abbcd01", "passages": "4cbbfe27abfc8c7b"}
 
 
 def _digest(scenarios: list[Scenario]) -> str:
@@ -88,6 +88,7 @@ EDGE_DIGESTS = {
     "crowd": ("0f7b32ccc6fe54de", "ee14fee09a3ff416", "b85f9b7586a0b6f0"),
     "warehouse_moving": ("ee53499f0440d1e5", "4cea8f01be9fd453", "31c5d63e58dbfd92"),
     "maze": ("d94f99af1cf2db3c", "a7cd7c495c9b2285", "112fe3d7fea86262"),
+    "passages": ("f77f1549a6a65c89", "4e428804cd167c94", "bf57594d8e26f999"),
 }
 
 
