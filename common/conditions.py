@@ -29,6 +29,11 @@ knob               meaning                                                  flat
 ``gyro_noise``     σ of each gyroscope reading, rad/s                        (3D only)  0.005
 ``gyro_bias``      σ of the gyroscope's bias, drawn per episode, rad/s       (3D only)  0.0005
 ``accel_noise``    σ of each accelerometer reading, m/s²                     (3D only)  0.05
+``robot_family``   robots drawn per episode, each scenario generated for     none       (2D only)
+                   its robot: ``true`` (circles r 0.1-0.3 m, boxes up to
+                   0.55 x 0.45 m, 0.5-2 m/s, 1-3 rad/s) or a mapping of
+                   :class:`~common.robots.RobotFamily`'s ranges; a
+                   generator kind or mix only
 =================  ======================================================  =========  ===========
 
 IR-SIM as a world (``--world irsim``, for evaluation) takes ``robot``, ``lidar_noise`` and
@@ -57,17 +62,17 @@ import functools
 from typing import Annotated, Any, Literal, NamedTuple
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from common.errors import ConfigError
-from common.robots import robot_profile
+from common.robots import RobotFamily, robot_profile
 from common.scenario import RobotProfile, Scenario
 
 Range = tuple[Annotated[float, Field(gt=0.0, le=10.0)], Annotated[float, Field(gt=0.0, le=10.0)]]
 Steps = Annotated[int, Field(ge=0, le=20)]
 HeadingSource = Literal["wheels", "gyro"]
 ONLY_3D = ("friction", "mass_scale", "control_period", "heading_source", "gyro_noise", "gyro_bias", "accel_noise")
-ONLY_2D = ("dynamics",)
+ONLY_2D = ("dynamics", "robot_family")
 # IR-SIM as a world (``--world irsim``) moves its robot by its own kinematics and senses with its own
 # lidar: it takes the robot and the lidar's beams and noise, and nothing that needs wheels or time.
 NOT_IN_IRSIM = (*ONLY_3D, *ONLY_2D, "odometry_noise", "action_delay", "motor_scale")
@@ -111,6 +116,20 @@ class Conditions(BaseModel):
     gyro_noise: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
     gyro_bias: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
     accel_noise: Annotated[float, Field(ge=0.0, le=10.0)] | None = None
+    robot_family: RobotFamily | None = None
+
+    @field_validator("robot_family", mode="before")
+    @classmethod
+    def _family(cls, value: Any) -> Any:
+        if value is True:
+            return RobotFamily()  # the default ranges
+        return None if value is False else value
+
+    @model_validator(mode="after")
+    def _one_robot(self) -> "Conditions":
+        if self.robot is not None and self.robot_family is not None:
+            raise ValueError("robot and robot_family both choose the robot; allowed: one of them")
+        return self
 
     @field_validator("robot")
     @classmethod

@@ -53,7 +53,7 @@ class NavigationEnv(gym.Env):
         if self.conditions.profile is not None:
             # Generated scenarios leave gaps sized for the robot that will drive them.
             template = template.model_copy(update={"robot": self.conditions.profile})
-        self.source = scenario_source(world, difficulty, template, resample)
+        self.source = scenario_source(world, difficulty, template, resample, self.conditions.robot_family)
         self.task = Task(goal_threshold, max_steps)
         self.observation_name = observation
         self.action_mapping = action_mapping

@@ -52,6 +52,18 @@ the robot drives; with 180 beams, 4 % (``tests/test_motion_layout.py``; the ``li
 condition sets the beams). It is the one layout with memory: :meth:`ObservationLayout.reset`
 starts it afresh (the env and a policy agent do, every episode).
 
+``lidar49_robot``: as ``lidar43_log``, then the robot itself, so one policy can drive robots of
+other sizes and limits (the ``robot_family`` condition trains it on them):
+
+====  ==================================================================  ====  ===
+43    bounding radius / 0.5 m                                               0    1
+44    width across the heading / 1 m                                        0    1
+45    length along the heading / 1 m                                        0    1
+46    v_max / 2 m/s                                                         0    1
+47    w_max / 3 rad/s                                                       0    1
+48    1 for a box footprint, 0 for a circle                                 0    1
+====  ==================================================================  ====  ===
+
 A lidar with other than 36 beams is reduced to 36 sectors of consecutive beams, each reading its
 nearest return. Values are clipped into the bounds (sensor noise may push them out).
 """
@@ -72,7 +84,7 @@ from common.kinematics import wrap_angle
 from common.readings import Readings
 from common.scenario import LidarSpec, RobotProfile
 
-LAYOUTS = ("nav7", "lidar43", "lidar43_log", "lidar79_motion")
+LAYOUTS = ("nav7", "lidar43", "lidar43_log", "lidar79_motion", "lidar49_robot")
 RANGE_RATE_SCALE = 3.0  # m/s
 _TWO_PI = 2.0 * math.pi
 # Neighbouring returns further apart than this in range are two surfaces (an edge), not one to
@@ -166,6 +178,8 @@ def make_layout(
 
     elif name == "lidar79_motion":
         return _motion_layout(robot, lidar, goal_distance_scale)
+    elif name == "lidar49_robot":
+        return _robot_layout(robot, lidar, goal_distance_scale)
     elif name in ("lidar43", "lidar43_log"):
         low = np.concatenate([[-1, -1, -1, -1, -1, -1], np.zeros(LIDAR43_BEAMS + 1)]).astype(np.float32)
         high = np.ones(43, dtype=np.float32)
@@ -242,6 +256,33 @@ def _range_rates(out, first, ranges, expected, bounds, elapsed, scale) -> None:
                 still = min(still, expected[i])
         rate = 0.0 if elapsed <= 0.0 or still == np.inf else (nearest - still) / elapsed / scale
         out[first + k] = min(max(rate, -1.0), 1.0)
+
+
+ROBOT_SCALES = (0.5, 1.0, 1.0, 2.0, 3.0, 1.0)  # lidar49_robot's divisors of the robot's entries
+
+
+def robot_entries(robot: RobotProfile) -> np.ndarray:
+    """``lidar49_robot``'s last six entries: the robot's size, limits and shape, scaled into [0, 1]."""
+    values = (robot.bounding_radius, robot.width_across, robot.length_along, robot.v_max, robot.w_max,
+              float(robot.shape == "box"))
+    return np.clip(np.array(values) / ROBOT_SCALES, 0.0, 1.0).astype(np.float32)
+
+
+def _robot_layout(robot: RobotProfile, lidar: LidarSpec, goal_distance_scale: float) -> ObservationLayout:
+    """``lidar49_robot``: ``lidar43_log`` and the robot's own entries (see the module)."""
+    scan = make_layout("lidar43_log", robot, lidar, goal_distance_scale)
+    size = 43 + len(ROBOT_SCALES)
+    low = np.concatenate([scan.space.low, np.zeros(len(ROBOT_SCALES), dtype=np.float32)])
+    high = np.ones(size, dtype=np.float32)
+    own = robot_entries(robot)
+
+    def compute(readings: Readings, goal: tuple[float, float]) -> np.ndarray:
+        out = np.empty(size, dtype=np.float32)
+        out[:43] = scan(readings, goal)
+        out[43:] = own
+        return out
+
+    return ObservationLayout("lidar49_robot", spaces.Box(low, high, dtype=np.float32), compute)
 
 
 def _motion_layout(robot: RobotProfile, lidar: LidarSpec, goal_distance_scale: float) -> ObservationLayout:

@@ -24,7 +24,7 @@ import numpy as np
 
 from common.occupancy import path_exists, shapes_grid
 from common.placement import BOX, CIRCLE
-from common.scenario import BoxObstacle, CircleObstacle, RobotProfile, Scenario
+from common.scenario import BoxObstacle, CircleObstacle, Scenario
 
 POST_RADIUS = 0.075  # m: a 0.15 m post
 SHELF_DEPTH = 0.4  # m
@@ -33,17 +33,6 @@ GAP = (1.2, 2.0)  # robot widths
 TURN_MARGIN = 0.3  # m beyond the bounding circle's diameter, between bands
 END_DEPTH = 1.0  # m: the start and the goal lie this far inside the world
 CHECK_RESOLUTION = 0.025  # m: a tenth of a robot width of 0.25 m, so a gap 1.2 widths across stays open
-
-
-def crossing_width(robot: RobotProfile) -> float:
-    """How wide the robot is across its heading: what a gap it drives through head-on must exceed."""
-    extents = []
-    for part in robot.outline:
-        if part.radius is not None:
-            extents += [part.center[1] - part.radius, part.center[1] + part.radius]
-        else:
-            extents += [y for _, y in part.vertices]
-    return max(extents) - min(extents)
 
 
 def _band(rng: np.random.Generator, length: float, width: float, shelf_share: float, stray: float) -> list[tuple]:
@@ -67,7 +56,7 @@ def _band(rng: np.random.Generator, length: float, width: float, shelf_share: fl
 def passages(template: Scenario, rng: np.random.Generator, difficulty: float) -> tuple | None:
     """A passages layout (see the module's docstring), or None to redraw."""
     world, robot = template.world, template.robot
-    width, reach = crossing_width(robot), 2.0 * robot.bounding_radius
+    width, reach = robot.width_across, 2.0 * robot.bounding_radius
     turn = reach + TURN_MARGIN
     stray = 0.1 + 0.2 * difficulty
     band_depth = max(SHELF_DEPTH, 2.0 * (stray + POST_RADIUS))

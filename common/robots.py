@@ -1,4 +1,5 @@
-"""Named robot profiles, so a curriculum or a command line can ask for a robot by name.
+"""Named robot profiles, so a curriculum or a command line can ask for a robot by name, and
+families of robots drawn per episode (the ``robot_family`` condition).
 
 ``physics3d`` is the 3D tier's URDF robot (``physics3d/assets/diff_drive.urdf``) as a profile:
 its footprint (body and wheels, 0.3 × 0.24 m), wheels and the 3D tutorial's limits. It lives here,
@@ -7,7 +8,10 @@ free of simulator imports, so a 2D stage can train on the 3D robot's profile.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from common.errors import ConfigError, quote
 from common.scenario import RobotProfile
@@ -41,3 +45,41 @@ def robot_profile(value: str | dict[str, Any] | RobotProfile, field: str = "robo
             error = pydantic_error(None, exc)
             raise ConfigError(None, f"{field}.{error.field}" if error.field else field, error.problem) from None
     raise ConfigError(None, field, f"got {quote(value)}; allowed: a robot name ({', '.join(PROFILES)}) or a mapping")
+
+
+Size = Annotated[float, Field(gt=0.0, le=2.0)]  # m: a robot this project's worlds have room for
+Rate = Annotated[float, Field(gt=0.0, le=10.0)]  # m/s, rad/s
+
+
+class RobotFamily(BaseModel):
+    """Robots drawn per episode: a shape from ``shapes``, then its size (a circle's ``radius``, or
+    a box's ``length`` along the heading and ``width`` across it), ``v_max`` and ``w_max``, each
+    uniform in its [low, high] range, in that order, from the env's seeded generator. The defaults
+    span the robots users bring: circles of 0.1-0.3 m radius, boxes up to 0.55 x 0.45 m, 0.5-2 m/s,
+    1-3 rad/s."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+
+    shapes: Annotated[tuple[Literal["circle", "box"], ...], Field(min_length=1, max_length=2)] = ("circle", "box")
+    radius: tuple[Size, Size] = (0.1, 0.3)
+    length: tuple[Size, Size] = (0.2, 0.55)
+    width: tuple[Size, Size] = (0.2, 0.45)
+    v_max: tuple[Rate, Rate] = (0.5, 2.0)
+    w_max: tuple[Rate, Rate] = (1.0, 3.0)
+
+    @model_validator(mode="after")
+    def _ordered(self) -> "RobotFamily":
+        for name in ("radius", "length", "width", "v_max", "w_max"):
+            low, high = getattr(self, name)
+            if low > high:
+                raise ValueError(f"{name}: [{low:g}, {high:g}]; allowed: [low, high] with low <= high")
+        return self
+
+    def draw(self, rng: np.random.Generator, base: RobotProfile | None = None) -> RobotProfile:
+        """One robot of the family (``base``'s other fields: wheels, accelerations, noise)."""
+        shape = self.shapes[int(rng.integers(len(self.shapes)))]
+        size = ({"radius": float(rng.uniform(*self.radius))} if shape == "circle"
+                else {"length": float(rng.uniform(*self.length)), "width": float(rng.uniform(*self.width))})
+        limits = {"v_max": float(rng.uniform(*self.v_max)), "w_max": float(rng.uniform(*self.w_max))}
+        return (base or RobotProfile()).model_copy(update={"shape": shape, **size, **limits})
+

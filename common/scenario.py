@@ -15,7 +15,6 @@ than the world's diagonal.
 from __future__ import annotations
 
 import math
-from functools import cached_property
 from pathlib import Path
 from typing import Annotated, Any, Literal, Union
 
@@ -296,10 +295,11 @@ class RobotProfile(Frozen):
         """The lowest angular velocity a raw command may reach."""
         return -self.w_max if self.w_min is None else self.w_min
 
-    @cached_property
+    @property
     def outline(self) -> tuple[FootprintPart, ...]:
         """The footprint as parts in the robot frame: one for a circle, box or polygon (a box's
-        corners counter-clockwise), a compound's own."""
+        corners counter-clockwise), a compound's own. Built on each call: a cached one would
+        outlive ``model_copy(update=...)``, which copies the instance's dict."""
         if self.parts is not None:
             return self.parts
         if self.vertices is not None:
@@ -309,6 +309,26 @@ class RobotProfile(Frozen):
         half_length, half_width = 0.5 * self.length, 0.5 * self.width
         return (FootprintPart(vertices=tuple((self.footprint_offset + sx * half_length, sy * half_width)
                                              for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1)))),)
+
+    def _span(self, axis: int) -> float:
+        """The footprint's extent along the robot frame's x (0) or y (1) axis."""
+        ends = []
+        for part in self.outline:
+            if part.radius is not None:
+                ends += [part.center[axis] - part.radius, part.center[axis] + part.radius]
+            else:
+                ends += [vertex[axis] for vertex in part.vertices]
+        return max(ends) - min(ends)
+
+    @property
+    def width_across(self) -> float:
+        """How wide the footprint is across the heading: what a gap it drives through head-on must exceed."""
+        return self._span(1)
+
+    @property
+    def length_along(self) -> float:
+        """How long the footprint is along the heading."""
+        return self._span(0)
 
     @property
     def bounding_radius(self) -> float:

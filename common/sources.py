@@ -15,6 +15,7 @@ import numpy as np
 
 from common.errors import ConfigError, quote
 from common.generators import KINDS, generate
+from common.robots import RobotFamily
 from common.scenario import Scenario
 from common.world_file import WorldFile
 
@@ -48,23 +49,31 @@ class ListSource:
 
 
 class GeneratorSource:
-    """A fresh training-split scenario of a kind each episode (seed drawn from the env's generator)."""
+    """A fresh training-split scenario of a kind each episode (seed drawn from the env's generator);
+    with a ``family``, first a robot drawn from it, the scenario generated for that robot."""
 
-    def __init__(self, kind: str, difficulty: float = 0.5, template: Scenario | None = None) -> None:
-        self.kind, self.difficulty, self.template = kind, difficulty, template
-        generate(kind, 0, difficulty, "train", template)  # fail now, not at the first reset
+    def __init__(self, kind: str, difficulty: float = 0.5, template: Scenario | None = None,
+                 family: RobotFamily | None = None) -> None:
+        self.kind, self.difficulty, self.template, self.family = kind, difficulty, template or Scenario(), family
+        # Fail now, not at the first reset (with a family, for one robot of it).
+        robot = family.draw(np.random.default_rng(0), self.template.robot) if family else self.template.robot
+        generate(kind, 0, difficulty, "train", self.template.model_copy(update={"robot": robot}))
 
     def draw(self, rng: np.random.Generator, resample: bool = False) -> Scenario:
-        return generate(self.kind, int(rng.integers(2**31 - 1)), self.difficulty, "train", self.template)
+        template = self.template
+        if self.family is not None:
+            template = template.model_copy(update={"robot": self.family.draw(rng, template.robot)})
+        return generate(self.kind, int(rng.integers(2**31 - 1)), self.difficulty, "train", template)
 
 
 class MixSource:
     """Each episode a kind drawn by weight, then a fresh training-split scenario of that kind."""
 
-    def __init__(self, weights: Mapping[str, float], difficulty: float = 0.5, template: Scenario | None = None) -> None:
+    def __init__(self, weights: Mapping[str, float], difficulty: float = 0.5, template: Scenario | None = None,
+                 family: RobotFamily | None = None) -> None:
         if not weights or any(w <= 0 for w in weights.values()):
             raise ConfigError(None, "world", "a mix needs at least one kind, each with a positive weight")
-        self.sources = [_kind_source(kind, difficulty, template) for kind in weights]
+        self.sources = [_kind_source(kind, difficulty, template, family) for kind in weights]
         total = float(sum(weights.values()))
         self.probabilities = [w / total for w in weights.values()]
 
@@ -86,18 +95,28 @@ class FileSource:
         return self.file.initial
 
 
-def _kind_source(kind: str, difficulty: float, template: Scenario | None) -> GeneratorSource:
+def _kind_source(kind: str, difficulty: float, template: Scenario | None,
+                 family: RobotFamily | None = None) -> GeneratorSource:
     if kind not in KINDS:
         raise ConfigError(None, "world", f"unknown scenario kind {quote(kind)}; allowed: {', '.join(KINDS)}")
     # The warehouse is defined by its 31 obstacles: it is always drawn at full difficulty.
-    return GeneratorSource(kind, 1.0 if kind == "warehouse" else difficulty, template)
+    return GeneratorSource(kind, 1.0 if kind == "warehouse" else difficulty, template, family)
 
 
 def scenario_source(world: Scenario | str | Path | Sequence[Scenario] | Mapping[str, float] | ScenarioSource,
-                    difficulty: float = 0.5, template: Scenario | None = None, resample: bool = False) -> ScenarioSource:
+                    difficulty: float = 0.5, template: Scenario | None = None, resample: bool = False,
+                    family: RobotFamily | None = None) -> ScenarioSource:
     """Interpret an env's ``world`` argument: a Scenario, a list of them, a generator kind or suite
     name (``open``, ``sparse``, ``cluttered``, ``warehouse``, ``trap``), a mapping of kinds to
-    weights (a mix), or a YAML path (``resample``: a random file's layout is redrawn every episode)."""
+    weights (a mix), or a YAML path (``resample``: a random file's layout is redrawn every episode).
+    A robot ``family`` needs a kind or a mix: only a generator lays a world out for each robot."""
+    if family is not None:
+        if isinstance(world, Mapping):
+            return MixSource(world, difficulty, template, family)
+        if isinstance(world, str) and world in KINDS:
+            return _kind_source(world, difficulty, template, family)
+        raise ConfigError(None, "robot_family", "robots drawn per episode need worlds generated for them; "
+                          "allowed: world as a generator kind or a mix of kinds")
     if isinstance(world, Scenario):
         return FixedSource(world)
     if isinstance(world, Mapping):

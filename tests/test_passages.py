@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from common.generators import generate
-from common.passages import crossing_width
 from common.robots import robot_profile
 from common.scenario import BoxObstacle, RobotProfile, Scenario
 
@@ -91,12 +90,12 @@ def test_every_gap_is_1_2_to_2_robot_widths_and_the_bands_leave_room_to_turn(nam
         assert all(u_start < band[:, 0].min() for band in bands) or all(u_start > band[:, 1].max() for band in bands)
 
 
-def test_the_crossing_width_is_the_footprint_across_the_heading():
-    assert [crossing_width(ROBOTS[name]) for name in WIDTHS] == pytest.approx(list(WIDTHS.values()))
+def test_the_width_across_is_the_footprint_across_the_heading():
+    assert [ROBOTS[name].width_across for name in WIDTHS] == pytest.approx(list(WIDTHS.values()))
     # The narrowest gaps are too narrow for a wide rectangle's bounding circle: what makes the kind
     # hard for planners that inflate by it.
     robot = ROBOTS["wide rectangle"]
-    assert GAP[0] * crossing_width(robot) < 2.0 * robot.bounding_radius
+    assert GAP[0] * robot.width_across < 2.0 * robot.bounding_radius
 
 
 def test_a_robot_crosses_the_bands_to_the_goal_through_the_gaps():

@@ -321,3 +321,10 @@ def test_a_compound_footprint_reaches_as_far_as_its_farthest_part():
                                                   {"center": (0.0, 0.4), "radius": 0.2}))
     assert robot.bounding_radius == pytest.approx(0.6)
     assert [part.radius for part in robot.outline] == [None, 0.2]
+
+
+def test_a_copied_profile_outlines_its_own_footprint_not_the_original_s():
+    robot = RobotProfile()
+    assert robot.outline[0].radius == 0.2 and robot.width_across == pytest.approx(0.4)
+    wider = robot.model_copy(update={"shape": "box", "length": 0.5, "width": 0.45})
+    assert wider.outline[0].radius is None and wider.width_across == pytest.approx(0.45)

@@ -1,0 +1,86 @@
+"""Robots as a condition: a robot drawn per episode from a family (seeded, within its ranges),
+each scenario generated for its robot, and the ``lidar49_robot`` layout that shows the policy
+which robot it drives."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import flatland  # noqa: F401
+from common.conditions import Conditions
+from common.errors import ConfigError
+from common.observations import make_layout, robot_entries
+from common.robots import RobotFamily
+from common.scenario import LidarSpec, RobotProfile
+
+
+def test_a_family_draws_seeded_robots_within_its_ranges_of_both_shapes():
+    family = RobotFamily()
+    robots = [family.draw(np.random.default_rng([7, k])) for k in range(200)]
+    again = [family.draw(np.random.default_rng([7, k])) for k in range(200)]
+    assert robots == again
+    circles = [r for r in robots if r.shape == "circle"]
+    boxes = [r for r in robots if r.shape == "box"]
+    assert 60 < len(circles) < 140 and len(circles) + len(boxes) == 200
+    assert all(0.1 <= r.radius <= 0.3 for r in circles)
+    assert all(0.2 <= r.length <= 0.55 and 0.2 <= r.width <= 0.45 for r in boxes)
+    assert all(0.5 <= r.v_max <= 2.0 and 1.0 <= r.w_max <= 3.0 for r in robots)
+    # The draws span their ranges, not one corner of them.
+    assert np.ptp([r.v_max for r in robots]) > 1.2 and np.ptp([r.radius for r in circles]) > 0.15
+    base = RobotProfile(accel_v=2.0, wheel_base=0.3)
+    assert all(r.accel_v == 2.0 and r.wheel_base == 0.3 for r in (family.draw(np.random.default_rng(k), base)
+                                                                   for k in range(5)))
+
+
+@pytest.mark.parametrize(("value", "message"), [
+    ({"radius": [0.3, 0.1]}, "robot_family: radius: [0.3, 0.1]; allowed: [low, high] with low <= high"),
+    ({"v_max": [0.5, 50]}, "robot_family.v_max.1: Input should be less than or equal to 10"),
+    ({"radius": [0.0, 0.2]}, "robot_family.radius.0: Input should be greater than 0"),
+    ({"shapes": ["triangle"]}, "robot_family.shapes.0: Input should be 'circle' or 'box'"),
+    ({"legs": 4}, "robot_family.legs: unknown key"),
+])
+def test_a_family_out_of_range_is_one_line_naming_the_field(value, message):
+    with pytest.raises(ConfigError) as error:
+        Conditions.parse({"robot_family": value})
+    assert message in str(error.value) and "\n" not in str(error.value)
+
+
+def test_a_family_and_a_robot_together_or_a_fixed_world_are_refused():
+    with pytest.raises(ConfigError, match="robot and robot_family both choose the robot"):
+        Conditions.parse({"robot_family": True, "robot": "physics3d"})
+    with pytest.raises(ConfigError, match="robot_family: robots drawn per episode need worlds generated for them"):
+        gym.make("flatland/Nav-v0", world="curricula/../README.md", robot_family=True)
+    with pytest.raises(ConfigError, match="robot_family: not a physics3d knob"):
+        Conditions.parse({"robot_family": True}).for_tier("physics3d")
+
+
+def test_each_episode_drives_a_drawn_robot_in_a_world_laid_out_for_it_and_sees_it():
+    from common.generators import generate
+
+    def episodes(seed: int):
+        env = gym.make("flatland/Nav-v0", world="passages", observation="lidar49_robot", robot_family=True)
+        out = []
+        for k in range(12):
+            obs, info = env.reset(seed=seed + k)
+            out.append((env.unwrapped.scenario, obs))
+        return out
+
+    first, again = episodes(3), episodes(3)
+    robots = [scenario.robot for scenario, _ in first]
+    assert robots == [scenario.robot for scenario, _ in again]
+    assert len({(r.shape, r.v_max) for r in robots}) == len(robots)  # a new robot every episode
+    assert {r.shape for r in robots} == {"circle", "box"}
+    for scenario, obs in first:
+        np.testing.assert_array_equal(obs[43:], robot_entries(scenario.robot))
+        # The world was generated for this robot: the generator with it as the template draws it again.
+        assert generate("passages", scenario.seed, 0.5, "train", scenario.model_copy()).obstacles == scenario.obstacles
+
+
+def test_the_robot_entries_scale_its_size_limits_and_shape():
+    box = RobotProfile(shape="box", length=0.51, width=0.43, v_max=2.0, w_max=1.5)
+    assert make_layout("lidar49_robot", box, LidarSpec()).space.shape == (49,)
+    assert robot_entries(box) == pytest.approx([box.bounding_radius / 0.5, 0.43, 0.51, 1.0, 0.5, 1.0])
+    circle = RobotProfile(radius=0.1, v_max=0.5, w_max=3.0)
+    assert robot_entries(circle) == pytest.approx([0.2, 0.2, 0.2, 0.25, 1.0, 0.0])
