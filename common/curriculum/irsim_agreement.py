@@ -6,8 +6,10 @@ episodes whose outcomes differ.
     python -m common.curriculum.irsim_agreement [--episodes 200] [--suites sparse,cluttered] [--policy ZIP ...]
 
 ``--suites`` takes any suite, and ``crowd_sfm``: the crowd suite's people under the social force,
-each on a fixed back-and-forth route (:func:`common.irsim_export.fixed_routes`), which IR-SIM
-moves as flatland does.
+each on a fixed route (:func:`common.irsim_export.fixed_routes`). Its people move by the same
+model in both, but each simulator draws their randomness from its own generator (an episode's
+crowd in flatland is seeded by the episode, IR-SIM's by ``irsim.make``), so crowd rows compare
+the two success rates, not episode by episode.
 
 prints a Markdown table (docs/deploy.md#policies-in-ir-sim-itself quotes it).
 """
