@@ -73,6 +73,9 @@ def test_bench_json_has_the_agreed_keys(capsys, monkeypatch, tmp_path):
     assert 0 < results["ppo_rollout_share_sparse"] < 1
     assert results["ppo_steps_per_s_cluttered_subproc"] > 0 and results["ppo_subproc_vs_dummy"] > 0
     assert results["movers_vs_static"] > 0 and results["physics3d_movers_vs_static"] > 0
+    assert results["reset_ms_maze"] > 0 and results["reset_ms_passages"] > 0
+    for algorithm in ("ppo", "sac"):
+        assert results[f"onnx_actions_per_s_{algorithm}"] > 0 and results[f"onnx_vs_torch_{algorithm}"] > 0
 
 
 def test_bench_takes_the_faster_of_two_alternated_ppo_runs_of_each_setting(monkeypatch):
