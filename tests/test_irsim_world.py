@@ -111,3 +111,20 @@ def test_an_irsim_world_file_runs_in_irsim_through_the_cli(capsys, tmp_path):
     assert main(["compare", "--world", "irsim", "--scenario-file", str(world), "--controllers", "dwa",
                  "--episodes", "1", "--json", "--out", str(tmp_path)]) == 0
     assert json.loads(capsys.readouterr().out)["dwa"]["episodes"] == 1
+
+
+def test_the_agreement_table_pairs_the_episodes_of_both_worlds(capsys):
+    optional("irsim")
+    from types import SimpleNamespace
+
+    from common.curriculum.irsim_agreement import _paired, main
+
+    def summary(outcomes: str):
+        return SimpleNamespace(rows=[SimpleNamespace(outcome="success" if c == "s" else "collision") for c in outcomes])
+
+    # Two arrived only in flatland, six only in IR-SIM: the exact two-sided test of 2 in 8.
+    assert _paired(summary("ssssss" + "cccccc" + "ss"), summary("sssscc" + "ssssss" + "ss")) == "2 / 6 (0.29)"
+    policy = str(ROOT / "curricula" / "policies" / "stage1_2d_ppo.zip")
+    assert main(["--episodes", "2", "--suites", "sparse", "--policy", policy]) == 0
+    row = capsys.readouterr().out.strip().splitlines()[-1]
+    assert row.startswith("| stage1_2d_ppo | sparse | ") and row.count("|") == 8

@@ -97,6 +97,18 @@ def first_difference(policy_path: str | Path, scenario, seed: int, conditions: C
         worlds[1].close()
 
 
+def _paired(flat: Summary, irsim: Summary) -> str:
+    """Episodes that arrived in one world only, each way, and the exact McNemar test's p-value:
+    whether one world lets the policy arrive more often than chance flips would."""
+    from scipy.stats import binomtest
+
+    pairs = [(a.outcome == "success", b.outcome == "success") for a, b in zip(flat.rows, irsim.rows)]
+    only_flat = sum(ours and not theirs for ours, theirs in pairs)
+    only_irsim = sum(theirs and not ours for ours, theirs in pairs)
+    p = binomtest(only_flat, only_flat + only_irsim).pvalue if only_flat + only_irsim else 1.0
+    return f"{only_flat} / {only_irsim} ({p:.2f})"
+
+
 def _rate(summary: Summary) -> str:
     low, high = summary.success_ci95
     return f"{100 * summary.success_rate:.1f}% ({100 * low:.1f}–{100 * high:.1f})"
@@ -110,8 +122,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     policies = args.policy or [str(SHIPPED / f"{name}.zip") for name in SHIPPED_2D]
     print("| policy | suite | flatland success (95% CI) | IR-SIM success (95% CI) | difference, points "
-          "| episodes with another outcome, by where they part |")
-    print("|---|---|---:|---:|---:|---:|")
+          "| arrived in one world only: flatland / IR-SIM (McNemar p) | episodes with another outcome, by where they part |")
+    print("|---|---|---:|---:|---:|---:|---:|")
     for path in policies:
         for suite in args.suites.split(","):
             result = compare_worlds(path, suite, args.episodes)
@@ -119,7 +131,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             differ = result["differences"]
             parts = ", ".join(f"{count} {kind}" for kind, count in sorted(differ.items())) or "0"
             print(f"| {Path(path).stem} | {suite} | {_rate(flat)} | {_rate(irsim)} | "
-                  f"{100 * (irsim.success_rate - flat.success_rate):+.1f} | {parts} |", flush=True)
+                  f"{100 * (irsim.success_rate - flat.success_rate):+.1f} | {_paired(flat, irsim)} | {parts} |",
+                  flush=True)
     return 0
 
 
