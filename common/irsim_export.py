@@ -84,6 +84,8 @@ def _groups(scenario: Scenario) -> tuple[list[dict], list[dict]]:
             raise ConfigError(None, f"{where}.behavior.yield_distance", "IR-SIM's dash never yields to the robot; "
                                                                         "allowed: 0, or reacts_to_robot: false")
         section = robots if motion.role == "robot" else obstacles
+        if motion.group is None and isinstance(motion.behavior, Orca):
+            raise ConfigError(None, f"{where}.group", "IR-SIM runs ORCA as a group behaviour only; allowed: a group")
         if motion.group is None:
             section.append({**_mover(obstacle), "behavior": _behavior(motion)})
             continue
@@ -183,11 +185,13 @@ def scenario_to_irsim(scenario: Scenario) -> dict[str, Any]:
 
 
 def fixed_routes(scenario: Scenario, count: int | None = None) -> Scenario:
-    """The scenario with its people (the first ``count``, default all) each planning alone and
-    walking back and forth to their first goal: a crowd both simulators move alike (a wanderer's
-    next goals are drawn by each simulator from its own generator; a group plans as one)."""
+    """The scenario with its people (the first ``count``, default all) each walking back and forth
+    to their first goal, planning alone (ORCA's people in their group: IR-SIM runs ORCA for groups
+    only): a crowd both simulators move alike (a wanderer's next goals are drawn by each simulator
+    from its own generator)."""
     people = []
     for person in scenario.movers[:count]:
-        motion = person.motion.model_copy(update={"group": None, "wander": None, "route": "back_and_forth"})
+        group = person.motion.group if isinstance(person.motion.behavior, Orca) else None
+        motion = person.motion.model_copy(update={"group": group, "wander": None, "route": "back_and_forth"})
         people.append(person.model_copy(update={"motion": motion}))
     return scenario.model_copy(update={"obstacles": [*scenario.static_obstacles, *people]})

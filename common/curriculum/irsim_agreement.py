@@ -5,8 +5,8 @@ episodes whose outcomes differ.
 
     python -m common.curriculum.irsim_agreement [--episodes 200] [--suites sparse,cluttered] [--policy ZIP ...]
 
-``--suites`` takes any suite, and ``crowd_sfm``: the crowd suite's people under the social force,
-each on a fixed route (:func:`common.irsim_export.fixed_routes`). Its people move by the same
+``--suites`` takes any suite, and ``crowd_sfm`` and ``crowd_orca``: the crowd suite's people under
+the social force (seeing the robot) or ORCA (blind to it), each on a fixed route (:func:`common.irsim_export.fixed_routes`). Its people move by the same
 model in both, but each simulator draws their randomness from its own generator (an episode's
 crowd in flatland is seeded by the episode, IR-SIM's by ``irsim.make``), so crowd rows compare
 the two success rates, not episode by episode.
@@ -37,12 +37,14 @@ SHIPPED_2D = ("stage1_2d_ppo", "stage1_2d_sac", "stage1_2d_td3", "curriculum_2d_
 
 # The crowd both simulators move alike: people under the social force (IR-SIM's group sees the
 # robot as the suite's people do), each walking back and forth on its own route.
-CROWD_SFM = Suite(name="crowd_sfm", kind="crowd", options=(("reacting", True), ("behavior", "sfm")))
+# ORCA people do not see the robot there: IR-SIM's ORCA sees only the agents it moves.
+CROWDS = {"crowd_sfm": Suite(name="crowd_sfm", kind="crowd", options=(("reacting", True), ("behavior", "sfm"))),
+          "crowd_orca": Suite(name="crowd_orca", kind="crowd", options=(("reacting", False), ("behavior", "orca")))}
 
 
 def _scenarios(suite: str, count: int, seed: int):
-    if suite == CROWD_SFM.name:
-        return (fixed_routes(scenario) for scenario in CROWD_SFM.scenarios(count=count, seed=seed))
+    if suite in CROWDS:
+        return (fixed_routes(scenario) for scenario in CROWDS[suite].scenarios(count=count, seed=seed))
     return get_suite(suite).scenarios(count=count, seed=seed)
 
 
@@ -117,7 +119,7 @@ def _rate(summary: Summary) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m common.curriculum.irsim_agreement", description=__doc__.split("\n\n")[0])
     parser.add_argument("--episodes", type=int, default=200)
-    parser.add_argument("--suites", default="sparse,cluttered", help="comma-separated suites, or crowd_sfm")
+    parser.add_argument("--suites", default="sparse,cluttered", help="comma-separated suites, or crowd_sfm, crowd_orca")
     parser.add_argument("--policy", nargs="*", metavar="ZIP", help="default: the shipped 2D policies")
     args = parser.parse_args(argv)
     policies = args.policy or [str(SHIPPED / f"{name}.zip") for name in SHIPPED_2D]
