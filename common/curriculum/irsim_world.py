@@ -65,7 +65,11 @@ class IrsimWorld:
             data = scenario_to_irsim(_with_map_image(self.scenario, Path(folder)))
             path = Path(folder) / "world.yaml"
             path.write_text(yaml.safe_dump(data, sort_keys=False))
-            self.env = irsim.make(str(path), display=False, log_level="ERROR", seed=seed)
+            try:
+                self.env = irsim.make(str(path), display=False, log_level="ERROR", seed=seed)
+            except (ValueError, KeyError, TypeError) as exc:  # what the export says that IR-SIM will not run
+                message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+                raise ConfigError(None, "--world", f"IR-SIM refused {scenario.name}: {message}") from None
         self.dt = self.scenario.world.step_time
         self.steps = 0
 
