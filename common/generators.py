@@ -142,7 +142,7 @@ def _maze(template: Scenario, rng: np.random.Generator, difficulty: float) -> tu
 def _checked(template: Scenario, start: tuple, goal: tuple, obstacles: list[Obstacle]) -> tuple | None:
     """The layout if its start and goal are clear of the obstacles and the goal is reachable, else None."""
     scenario = template.model_copy(update=dict(start=start, goal=goal, obstacles=obstacles))
-    return (start, goal, obstacles) if _valid(scenario) and goal_reachable(scenario) else None
+    return (start, goal, obstacles) if not scenario.placement_problems() and goal_reachable(scenario) else None
 
 
 # Each returns (start, goal, obstacles) already checked (clear and reachable), and any other field
@@ -192,14 +192,6 @@ def generate(kind: str, seed: int, difficulty: float = 0.5, split: Split = "trai
     raise ConfigError(None, "robot", f"no reachable {kind} layout in {_MAX_ATTEMPTS} attempts (seed {seed}) for a robot "
                       f"of bounding radius {template.robot.bounding_radius:g} m in a {world.width:g} m x "
                       f"{world.height:g} m world; allowed: a smaller robot or a larger world")
-
-
-def _valid(scenario: Scenario) -> bool:
-    try:
-        scenario.check()
-    except ConfigError:
-        return False
-    return True
 
 
 @dataclass(frozen=True)

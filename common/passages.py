@@ -101,16 +101,6 @@ def passages(template: Scenario, rng: np.random.Generator, difficulty: float) ->
     scenario = template.model_copy(update=dict(start=start_pose, goal=goal, obstacles=obstacles))
     grid = shapes_grid(world, np.array(kinds, dtype=np.int64), np.array(params, dtype=float).reshape(-1, 5),
                        CHECK_RESOLUTION, 0.5 * width)
-    if not _clear(scenario) or not path_exists(grid, start, goal, template.goal_threshold):
+    if scenario.placement_problems() or not path_exists(grid, start, goal, template.goal_threshold):
         return None
     return start_pose, goal, obstacles
-
-
-def _clear(scenario: Scenario) -> bool:
-    from common.errors import ConfigError
-
-    try:
-        scenario.check()
-    except ConfigError:
-        return False
-    return True
