@@ -31,7 +31,7 @@ KERNEL_MODULES = (
     "common/irsim_format.py", "common/irsim_geometry.py", "common/kinematics.py", "common/motion/orca.py",
     "common/motion/sfm.py", "common/motion/steering.py", "common/motion/step.py", "common/motion/table.py",
     "common/moving_kinds.py", "common/observations.py", "common/planners/astar.py", "common/planners/collision.py",
-    "common/planners/rrt.py", "common/planners/smoothing.py", "common/readings.py",
+    "common/planners/footprint.py", "common/planners/rrt.py", "common/planners/smoothing.py", "common/readings.py",
     "flatland/clearance.py", "flatland/free_step.py", "flatland/lidar.py",
 )
 

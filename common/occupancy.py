@@ -308,16 +308,22 @@ class ScanMapper:
         Points up to one cell outside the grid are clamped onto its edge (returns from boundary
         walls lie exactly on it, and lidar noise pushes some just beyond); farther ones are dropped.
         """
+        rows, cols, keep = self.cells_of(points)
+        flat = rows[keep] * self.shape[1] + cols[keep]
+        if flat.size:
+            self.hits += np.bincount(flat, minlength=self.hits.size).reshape(self.shape).astype(np.int32)
+            self._grid = None
+        return int(flat.size)
+
+    def cells_of(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(rows, cols) of world points (N, 2), clamped onto the grid, and which of them
+        :meth:`add_points` keeps (those at most one cell off the grid)."""
         points = np.asarray(points, dtype=float).reshape(-1, 2)
         rows, cols = self.shape
         c = np.floor((points[:, 0] - self.origin[0]) / self.resolution).astype(np.int64)
         r = np.floor((points[:, 1] - self.origin[1]) / self.resolution).astype(np.int64)
         keep = (c >= -1) & (c <= cols) & (r >= -1) & (r <= rows)
-        flat = np.clip(r[keep], 0, rows - 1) * cols + np.clip(c[keep], 0, cols - 1)
-        if flat.size:
-            self.hits += np.bincount(flat, minlength=rows * cols).reshape(self.shape).astype(np.int32)
-            self._grid = None
-        return int(flat.size)
+        return np.clip(r, 0, rows - 1), np.clip(c, 0, cols - 1), keep
 
     def add_scan(self, geometry: "LidarGeometry", ranges: np.ndarray, pose: tuple[float, float, float]) -> int:
         """Mark the returns of one scan taken at ``pose`` (beams that hit nothing are ignored)."""

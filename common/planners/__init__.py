@@ -7,8 +7,8 @@ points (N, 2) or None; :data:`PLANNERS` maps names to those classes.
 from common.planners.astar import AStar
 from common.planners.base import Planner, path_length
 from common.planners.rrt import RRT
-from common.planners.smoothing import shortcut
+from common.planners.smoothing import keep_clear, shortcut
 
 PLANNERS: dict[str, type] = {"astar": AStar, "rrt": RRT}
 
-__all__ = ["AStar", "PLANNERS", "Planner", "RRT", "path_length", "shortcut"]
+__all__ = ["AStar", "PLANNERS", "Planner", "RRT", "keep_clear", "path_length", "shortcut"]

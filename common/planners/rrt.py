@@ -1,4 +1,6 @@
-"""RRT in continuous space, collision-checked against an occupancy grid.
+"""RRT in continuous space, collision-checked against an occupancy grid, or on a
+:class:`~common.planners.footprint.FootprintGrid` for the robot's footprint: each edge driven
+straight, heading along it, after a turn on the spot at the node it leaves from.
 
 All randomness is drawn up front with the planner's ``numpy.random.Generator`` and handed to a
 numba kernel, so a seed fixes the result exactly and the kernel itself stays deterministic.
@@ -14,12 +16,30 @@ from common.kernel_cache import kernel
 from common.occupancy import OccupancyGrid
 from common.planners.base import Point, grid_arrays
 from common.planners.collision import segment_free_sampled
+from common.planners.footprint import FootprintGrid, segment_free, turn_free
 
 
 @kernel
-def _rrt(occupied: np.ndarray, x0: float, y0: float, resolution: float, start: np.ndarray, goal: np.ndarray,
-         draws: np.ndarray, goal_bias: float, step: float) -> np.ndarray:
-    """The tree's path start → goal as world points (N, 2), or an empty (0, 2) array.
+def _edge_free(field: np.ndarray, occupied: np.ndarray, x0: float, y0: float, resolution: float, centres: np.ndarray,
+               radii: np.ndarray, exact: int, boxes: np.ndarray, margin: float, heading: float, ax: float, ay: float,
+               bx: float, by: float) -> bool:
+    """Whether a tree edge a -> b is free: sampled on the grid, or (a ``field`` given) for the
+    footprint turning at a from ``heading`` (NaN: no turn to check) and driving straight on."""
+    if field.size == 0:
+        return segment_free_sampled(occupied, x0, y0, resolution, ax, ay, bx, by)
+    if not math.isnan(heading) and not turn_free(field, occupied, x0, y0, resolution, centres, radii, exact, boxes,
+                                                 margin, ax, ay, heading, math.atan2(by - ay, bx - ax)):
+        return False
+    return segment_free(field, occupied, x0, y0, resolution, centres, radii, exact, boxes, margin, ax, ay, bx, by)
+
+
+@kernel
+def _rrt(field: np.ndarray, occupied: np.ndarray, x0: float, y0: float, resolution: float, centres: np.ndarray,
+         radii: np.ndarray, exact: int, boxes: np.ndarray, margin: float, start: np.ndarray, heading: float,
+         goal: np.ndarray, draws: np.ndarray, goal_bias: float, step: float) -> np.ndarray:
+    """The tree's path start → goal as world points (N, 2), or an empty (0, 2) array. Edges are
+    checked by :func:`_edge_free` (an empty ``field``: on ``occupied`` alone; the root's
+    ``heading`` NaN: any).
 
     ``draws`` holds one row per iteration: a uniform sample in [0, 1)² scaled to the grid, and a
     uniform number deciding whether this iteration steers towards the goal instead.
@@ -27,13 +47,16 @@ def _rrt(occupied: np.ndarray, x0: float, y0: float, resolution: float, start: n
     width, height = occupied.shape[1] * resolution, occupied.shape[0] * resolution
     iterations = draws.shape[0]
     nodes = np.empty((iterations + 1, 2))
+    headings = np.empty(iterations + 1)  # the heading each node is reached with
     parent = np.empty(iterations + 1, dtype=np.int64)
     nodes[0] = start
+    headings[0] = heading
     parent[0] = -1
     count = 1
     last = -1
-    if math.hypot(goal[0] - start[0], goal[1] - start[1]) <= step and segment_free_sampled(
-            occupied, x0, y0, resolution, start[0], start[1], goal[0], goal[1]):
+    if math.hypot(goal[0] - start[0], goal[1] - start[1]) <= step and _edge_free(
+            field, occupied, x0, y0, resolution, centres, radii, exact, boxes, margin, heading, start[0], start[1],
+            goal[0], goal[1]):
         last = 0
     for i in range(iterations):
         if last >= 0:
@@ -53,14 +76,17 @@ def _rrt(occupied: np.ndarray, x0: float, y0: float, resolution: float, start: n
             continue
         f = min(1.0, step / d)
         nx, ny = nodes[best, 0] + f * (qx - nodes[best, 0]), nodes[best, 1] + f * (qy - nodes[best, 1])
-        if not segment_free_sampled(occupied, x0, y0, resolution, nodes[best, 0], nodes[best, 1], nx, ny):
+        if not _edge_free(field, occupied, x0, y0, resolution, centres, radii, exact, boxes, margin, headings[best],
+                          nodes[best, 0], nodes[best, 1], nx, ny):
             continue
         nodes[count, 0] = nx
         nodes[count, 1] = ny
+        headings[count] = math.atan2(ny - nodes[best, 1], nx - nodes[best, 0])
         parent[count] = best
         count += 1
-        if math.hypot(goal[0] - nx, goal[1] - ny) <= step and segment_free_sampled(
-                occupied, x0, y0, resolution, nx, ny, goal[0], goal[1]):
+        if math.hypot(goal[0] - nx, goal[1] - ny) <= step and _edge_free(
+                field, occupied, x0, y0, resolution, centres, radii, exact, boxes, margin, headings[count - 1], nx, ny,
+                goal[0], goal[1]):
             last = count - 1
     if last < 0:
         return np.empty((0, 2))
@@ -93,12 +119,19 @@ class RRT:
         self.max_iterations = max_iterations
         self.rng = rng if rng is not None else np.random.default_rng(seed)
 
-    def plan(self, grid: OccupancyGrid, start: Point, goal: Point) -> np.ndarray | None:
-        """World points (N, 2) from start to goal, or None if either is blocked or no path is found in time."""
+    def plan(self, grid: OccupancyGrid | FootprintGrid, start: Point, goal: Point) -> np.ndarray | None:
+        """World points (N, 2) from start to goal, or None if either is blocked or no path is found
+        in time. On a footprint grid ``start`` may carry the robot's heading (x, y, yaw)."""
         s = np.array([float(start[0]), float(start[1])])
         g = np.array([float(goal[0]), float(goal[1])])
         if not (grid.is_free(*s) and grid.is_free(*g)):
             return None
         draws = self.rng.random((self.max_iterations, 3))
-        path = _rrt(*grid_arrays(grid), s, g, draws, self.goal_bias, self.step_size)
+        if isinstance(grid, FootprintGrid):
+            arrays = grid.arrays
+            heading = float(start[2]) if len(start) > 2 else math.nan
+        else:  # no field: the edges are checked on the grid's cells alone
+            arrays = (np.empty((0, 0)), *grid_arrays(grid), np.empty((0, 2)), np.empty(0), 0, np.empty((0, 4)), 0.0)
+            heading = math.nan
+        path = _rrt(*arrays, s, heading, g, draws, self.goal_bias, self.step_size)
         return path if len(path) else None
