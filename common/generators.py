@@ -22,7 +22,7 @@ from common.grid_maps import GridMap, maze_rooms
 from common.occupancy import goal_reachable, path_exists, shapes_grid
 from common.passages import passages
 from common.placement import CIRCLE
-from common.scenario import BoxObstacle, CircleObstacle, Obstacle, Scenario
+from common.scenario import BoxObstacle, CircleObstacle, Obstacle, RobotProfile, Scenario
 
 Split = Literal["train", "eval"]
 KINDS = ("open", "sparse", "cluttered", "warehouse", "trap", "crowd", "warehouse_moving", "maze", "passages")
@@ -197,7 +197,14 @@ def generate(kind: str, seed: int, difficulty: float = 0.5, split: Split = "trai
 @dataclass(frozen=True)
 class Suite:
     """A named, reproducible list of evaluation scenarios: (generator kind, count, base seed), and
-    the kind's options (a moving kind's variant)."""
+    the kind's options (a moving kind's variant).
+
+    The scenarios are laid out for the robot that drives them where the template's would not do:
+    a robot wider than the template's bounding circle may not fit a gap left for it, and a
+    ``for_robot`` suite (``passages``) sizes every gap by the robot's own width. A robot within
+    the template's bounding circle fits every layout drawn for it, and drives the suite's one
+    draw, so the figures measured on it keep their meaning.
+    """
 
     name: str
     kind: str
@@ -205,15 +212,22 @@ class Suite:
     base_seed: int = 0
     difficulty: float = 0.5
     options: tuple[tuple[str, Any], ...] = field(default=())
+    for_robot: bool = False
 
-    def scenarios(self, count: int | None = None, seed: int = 0, template: Scenario | None = None) -> Iterator[Scenario]:
-        """Yield the suite's scenarios; ``seed`` shifts the base seed, ``count`` overrides its length."""
+    def scenarios(self, count: int | None = None, seed: int = 0, template: Scenario | None = None,
+                  robot: RobotProfile | None = None) -> Iterator[Scenario]:
+        """Yield the suite's scenarios; ``seed`` shifts the base seed, ``count`` overrides its length;
+        ``robot``: the robot that will drive them (see the class)."""
+        template = template or Scenario()
+        if robot is not None and (self.for_robot or robot.bounding_radius > template.robot.bounding_radius):
+            template = template.model_copy(update={"robot": robot})
         for i in range(self.count if count is None else count):
             yield generate(self.kind, self.base_seed + seed + i, self.difficulty, "eval", template, **dict(self.options))
 
 
 SUITES: dict[str, Suite] = {
-    kind: Suite(name=kind, kind=kind, difficulty=1.0 if kind == "warehouse" else 0.5) for kind in KINDS
+    kind: Suite(name=kind, kind=kind, difficulty=1.0 if kind == "warehouse" else 0.5, for_robot=kind == "passages")
+    for kind in KINDS
 }
 # The crowd as the robot's targets are set: 12 people at 0.5-1.2 m/s who all see the robot; and the
 # same people blind to it (the hard case).

@@ -148,3 +148,24 @@ def test_a_layout_the_robot_cannot_cross_is_redrawn_and_refused_in_the_end(monke
     monkeypatch.setattr(passages, "GAP", (0.6, 0.9))
     with pytest.raises(ConfigError, match="no reachable passages layout"):
         generate("passages", 0, 0.5, "eval")
+
+
+def test_a_suite_is_laid_out_for_a_robot_its_layouts_may_not_fit():
+    from common.curriculum.cli import _scenarios, build_parser
+    from common.conditions import Conditions
+    from common.generators import SUITES
+
+    wide = ROBOTS["wide rectangle"]
+    laid_out = list(SUITES["passages"].scenarios(2, robot=wide))
+    assert all(scenario.robot == wide for scenario in laid_out)
+    assert laid_out[0].obstacles != next(SUITES["passages"].scenarios(1)).obstacles
+    # Other suites keep their one draw for a robot within the template's bounding circle, and lay
+    # out their own for a wider one.
+    small = robot_profile("physics3d")
+    assert all(scenario.robot == RobotProfile() for scenario in SUITES["sparse"].scenarios(2, robot=small))
+    assert all(scenario.robot == wide for scenario in SUITES["cluttered"].scenarios(2, robot=wide))
+    # The CLI draws a passages suite for the robot of --env-kwargs.
+    args = build_parser().parse_args(["eval", "--policy", "p.zip", "--suite", "passages", "--episodes", "2",
+                                      "--world", "flatland", "--seed", "0"])
+    conditions = Conditions.parse({"robot": {"shape": "box", "length": 0.51, "width": 0.43, "v_max": 2.0}})
+    assert [s.obstacles for s in _scenarios(args, conditions=conditions)] == [s.obstacles for s in laid_out]

@@ -84,3 +84,18 @@ def test_the_robot_entries_scale_its_size_limits_and_shape():
     assert robot_entries(box) == pytest.approx([box.bounding_radius / 0.5, 0.43, 0.51, 1.0, 0.5, 1.0])
     circle = RobotProfile(radius=0.1, v_max=0.5, w_max=3.0)
     assert robot_entries(circle) == pytest.approx([0.2, 0.2, 0.2, 0.25, 1.0, 0.0])
+
+
+def test_a_robot_on_the_command_line_drives_instead_of_a_policys_family_and_the_other_way_round():
+    from types import SimpleNamespace
+
+    from common.curriculum.cli import _conditions
+
+    family_policy = SimpleNamespace(env_kwargs={"robot_family": True, "lidar_beams": 360})
+    args = SimpleNamespace(env_kwargs=[("robot", "physics3d")], world="flatland")
+    given = _conditions(args, [family_policy]).given()
+    assert given["robot"] == "physics3d" and "robot_family" not in given and given["lidar_beams"] == 360
+    one_robot_policy = SimpleNamespace(env_kwargs={"robot": "physics3d"})
+    args = SimpleNamespace(env_kwargs=[("robot_family", True)], world="flatland")
+    given = _conditions(args, [one_robot_policy]).given()
+    assert "robot" not in given and given["robot_family"]["shapes"] == ["circle", "box"]

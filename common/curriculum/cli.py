@@ -100,12 +100,13 @@ def _eval(args: argparse.Namespace) -> int:
 
     agents = _policies(args.policy)
     _settle(args, agents)
-    scenarios = _scenarios(args)
+    _scenarios(args, count=1)  # a bad scenario file is refused before any episode
     # Each policy runs episodes as long as, under the conditions and judged within the goal radius
     # it trained with, unless --max-steps, --env-kwargs and --goal-threshold say otherwise.
     summaries = []
     for agent in agents:
         radius, conditions = _judged(args, [agent]), _conditions(args, [agent])
+        scenarios = _scenarios(args, conditions=conditions)
         _announce(args, agent.name, len(scenarios), radius, conditions)
         summaries += evaluate([agent], scenarios, args.world, seed=args.seed, max_steps=args.max_steps,
                               conditions=conditions, goal_radius=radius)
@@ -164,9 +165,10 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
-def _scenarios(args: argparse.Namespace, count: int | None = None):
+def _scenarios(args: argparse.Namespace, count: int | None = None, conditions=None):
     """The scenarios an eval/compare/render run uses: a suite's, or a world file's (parsed once;
-    a file with random placements is drawn anew per episode, from seed S + i)."""
+    a file with random placements is drawn anew per episode, from seed S + i). A suite laid out
+    for its robot (``passages``) is drawn for the robot of ``conditions``."""
     from common.generators import get_suite
     from common.world_file import WorldFile
 
@@ -175,7 +177,8 @@ def _scenarios(args: argparse.Namespace, count: int | None = None):
         file = WorldFile(args.scenario_file)
         scenarios = [file.scenario(args.seed + i) for i in range(count)]
     else:
-        scenarios = list(get_suite(args.suite).scenarios(count=count, seed=args.seed))
+        robot = conditions.for_tier(args.world, strict=False).profile if conditions is not None else None
+        scenarios = list(get_suite(args.suite).scenarios(count=count, seed=args.seed, robot=robot))
     return scenarios
 
 
@@ -251,6 +254,7 @@ def _compare(args: argparse.Namespace) -> int:
     from common.curriculum.comparison import bar_chart, markdown_table, write_csv
 
     radius, conditions = _judged(args, agents), _conditions(args, agents)
+    scenarios = _scenarios(args, conditions=conditions) if not args.scenario_file else scenarios
     source = Path(args.scenario_file).stem if args.scenario_file else args.suite
     out = _compare_directory(Path(args.out) if args.out else Path("runs") / "compare" / f"{args.world}-{source}")
     _announce(args, f"{len(agents)} agents", len(scenarios), radius, conditions)
@@ -310,7 +314,14 @@ def _conditions(args: argparse.Namespace, agents) -> "Conditions":
     except ConfigError as error:
         raise ConfigError(None, error.field if error.field.startswith("--") else f"--env-kwargs.{error.field}",
                           error.problem) from None
-    return Conditions.parse({**resolved.given(), **extra.given()}) if override else resolved
+    if not override:
+        return resolved
+    trained_knobs = resolved.given()
+    # A robot given on the command line drives instead of the robots a policy was trained on, and the other way round.
+    for given, replaced in (("robot", "robot_family"), ("robot_family", "robot")):
+        if given in extra.given():
+            trained_knobs.pop(replaced, None)
+    return Conditions.parse({**trained_knobs, **extra.given()})
 
 
 def _file_name(name: str) -> str:
@@ -333,8 +344,8 @@ def _render(args: argparse.Namespace) -> int:
         raise ConfigError(gif, None, "--out names the GIF to write (FILE.gif), not a directory or another kind of file")
     agent = _agent(args.agent)
     _settle(args, [agent])
-    scenario = _scenarios(args, count=args.index + 1)[args.index]
     radius, conditions = _judged(args, [agent]), _conditions(args, [agent])
+    scenario = _scenarios(args, count=args.index + 1, conditions=conditions)[args.index]
     _announce(args, agent.name, 1, radius, conditions)
     scenario = conditions.for_tier(args.world).scenario(scenario)  # the robot and the encoders that drive
     gif, episode, true_path, estimate = _record(agent, scenario, args, gif, radius, args.every)

@@ -19,8 +19,10 @@ TEST_SEED_SHIFT = 100_000
 
 
 def stage_scenarios(stage: StageSpec, count: int, first: int) -> list[Scenario]:
-    """A draw of the stage's eval suite (judged within :func:`stage_radius`)."""
-    return get_suite(stage.eval.suite).scenarios(count=count, seed=first)
+    """A draw of the stage's eval suite (judged within :func:`stage_radius`; a suite laid out for
+    its robot, for the stage's)."""
+    robot = conditions_of(stage.env_kwargs).for_tier(stage.world).profile
+    return list(get_suite(stage.eval.suite).scenarios(count=count, seed=first, robot=robot))
 
 
 def stage_radius(stage: StageSpec) -> float | None:
