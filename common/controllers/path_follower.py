@@ -22,6 +22,7 @@ import math
 import numpy as np
 
 from common.controllers.base import Controller
+from common.controllers.waypoint import Path
 from common.kinematics import wrap_angle
 from common.occupancy import ScanMapper
 from common.planners import PLANNERS, keep_clear, path_length, shortcut
@@ -72,6 +73,7 @@ class PathFollower(Controller):
     """
 
     default_planner = "astar"
+    keeps_clear = False  # move the smoothed path up the clearance (a sampled path hugs what it passed)
     # The slowest it threads a gap (m/s; 3 cm a step at 10 Hz), and how fast it may close on the
     # goal (1/s: at 0.1 m from it the robot drives 0.2 m/s).
     SLOWEST = 0.3
@@ -126,14 +128,11 @@ class PathFollower(Controller):
             self._grid = None
         return new
 
-    def _blocked(self, new: np.ndarray, x: float, y: float, yaw: float) -> bool:
+    def _blocked(self, new: np.ndarray, x: float, y: float) -> bool:
         """Whether new returns leave no room for the footprint along the rest of the path."""
         ahead = np.vstack([(x, y), self.path[self.target + 1:]])
         reach = self.robot.bounding_radius + self.clearance + self.resolution
-        starts, edges = ahead[:-1], np.diff(ahead, axis=0)
-        offsets = new[:, None] - starts[None]
-        t = np.clip(np.einsum("mkj,kj->mk", offsets, edges) / np.maximum((edges**2).sum(axis=1), 1e-12), 0.0, 1.0)
-        if np.hypot(*(offsets - t[..., None] * edges[None]).transpose(2, 0, 1)).min() > reach:
+        if Path(ahead).locate(new)[1].min() > reach:
             return False  # every new return lies beyond the footprint's reach of the path
         return not self.grid.path_free(ahead[1:], None) or not self.grid.segment_free(ahead[0], ahead[1])
 
@@ -148,7 +147,7 @@ class PathFollower(Controller):
         if path is not None and self.smooth:
             path = shortcut(grid.with_margin(self.open_clearance), _merge_straight(path),
                             start[2] if len(start) > 2 else None)
-            if self.default_planner == "rrt":  # A*'s costs already keep it to the middle of gaps
+            if self.keeps_clear:
                 path = keep_clear(grid, path, self.open_clearance)
         self.since_plan = 0
         self.plans += 1
@@ -167,7 +166,7 @@ class PathFollower(Controller):
             self.mapper = self._make_mapper(x, y, goal)
         new = self._add_scan(readings.lidar, (x, y, yaw))
         self.since_plan += 1
-        if self.path is None or (len(new) and self._blocked(new, x, y, yaw)):
+        if self.path is None or (len(new) and self._blocked(new, x, y)):
             self._plan(x, y, yaw, goal)
         elif self.since_plan >= self.replan_every:
             self._plan(x, y, yaw, goal, keep=True)
@@ -221,6 +220,7 @@ class AStarPursuit(PathFollower):
 
 
 class RrtPursuit(PathFollower):
-    """RRT for the footprint on the scan-built grid, followed by pure pursuit."""
+    """RRT for the footprint on the scan-built grid, its path kept clear of what it passes, followed by pure pursuit."""
 
     default_planner = "rrt"
+    keeps_clear = True  # A*'s costs already keep its path to the middle of gaps
