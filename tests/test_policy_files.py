@@ -190,3 +190,38 @@ def test_a_sac_checkpoint_whose_entropy_coefficient_has_the_wrong_shape_is_refus
     with pytest.raises(ConfigError) as error:
         load_weights(_model(SAC), bad, policy_only=False)
     _assert_one_line_refusal(error, bad, "pytorch_variables.pth", "log_ent_coef is missing or misshapen")
+
+
+def test_a_bounded_mean_ppo_policy_acts_on_the_tanh_of_its_mean_and_loads_back_bounded(tmp_path):
+    from common.curriculum.policy import policy_class
+
+    env = gym.make("flatland/Nav-v0", world="open", observation="nav7")
+    model = PPO(policy_class("ppo"), env, n_steps=64, batch_size=64, device="cpu", seed=0,
+                policy_kwargs={"bounded_mean": True})
+    with torch.no_grad():  # a mean far past the bounds: 3 and -4 before the tanh
+        model.policy.action_net.weight.zero_()
+        model.policy.action_net.bias.copy_(torch.tensor([3.0, -4.0]))
+    observation = env.observation_space.sample()
+    expected = np.tanh([3.0, -4.0]).astype(np.float32)
+    assert np.allclose(model.predict(observation, deterministic=True)[0], expected, atol=1e-6)
+    sampled = model.policy.get_distribution(torch.as_tensor(observation[None])).distribution
+    assert np.allclose(sampled.mean.detach().numpy()[0], expected, atol=1e-6)  # training samples round it too
+    path = save_policy(model, tmp_path / "bounded.zip", {"algorithm": "ppo", **NAV7})
+    assert PolicyFile(path).manifest.policy_kwargs.bounded_mean is True
+    agent = load_policy(path)
+    assert np.allclose(agent.model.predict(observation, deterministic=True)[0], expected, atol=1e-6)
+    # Unbounded, the same weights act at the bounds.
+    plain = PPO(policy_class("ppo"), env, n_steps=64, batch_size=64, device="cpu", seed=0)
+    plain.policy.load_state_dict(model.policy.state_dict())
+    assert np.allclose(plain.predict(observation, deterministic=True)[0], [1.0, -1.0])
+
+
+def test_bounded_mean_is_ppos_alone():
+    from common.curriculum.schema import curriculum_from_mapping
+
+    stage = {"name": "s", "scenarios": {"kind": "open"}, "algorithm": "sac", "budget": 100,
+             "eval": {"suite": "open"}, "hyperparams": {"policy_kwargs": {"bounded_mean": True}}}
+    with pytest.raises(ConfigError) as error:
+        curriculum_from_mapping({"name": "c", "stages": [stage]}, "c.yaml")
+    assert str(error.value) == ("c.yaml: stages.0.hyperparams.policy_kwargs.bounded_mean: bounds a PPO policy's "
+                                "Gaussian mean; allowed: algorithm ppo (this stage's: sac)")

@@ -64,6 +64,8 @@ class PolicyKwargs(BaseModel):
     share_features_extractor: bool | None = None
     log_std_init: Annotated[float, Field(ge=-20.0, le=20.0)] | None = None
     ortho_init: bool | None = None
+    # PPO: the Gaussian's mean squashed into [-1, 1] by tanh (common.curriculum.policy.NavActorCriticPolicy).
+    bounded_mean: bool | None = None
 
     def to_sb3(self) -> dict[str, Any]:
         """The keyword arguments stable-baselines3 takes (unset keys left to its defaults)."""

@@ -1,8 +1,8 @@
 """A policy zip's actor exported to ONNX (the file: :mod:`common.curriculum.onnx_policy`).
 
 The graph is the deterministic action stable-baselines3's ``predict`` computes, with the
-observation normaliser folded in before it: PPO's Gaussian mean clipped to [-1, 1] (``predict``
-clips to the action space), SAC's tanh of its mean, TD3's actor (a tanh already). Export goes
+observation normaliser folded in before it: PPO's Gaussian mean (its tanh with ``bounded_mean``)
+clipped to [-1, 1] (``predict`` clips to the action space), SAC's tanh of its mean, TD3's actor (a tanh already). Export goes
 through torch's own exporter (``torch.onnx.export`` with ``dynamo=True``: ``torch.export``, then
 onnxscript's translation); the batch dimension stays free.
 """
@@ -45,7 +45,8 @@ class DeterministicActor(nn.Module):
         policy = self.policy
         if self.algorithm == "ppo":
             features = policy.extract_features(observation, policy.pi_features_extractor)
-            return torch.clamp(policy.action_net(policy.mlp_extractor.forward_actor(features)), -1.0, 1.0)
+            mean = policy.action_net(policy.mlp_extractor.forward_actor(features))
+            return torch.clamp(torch.tanh(mean) if policy.bounded_mean else mean, -1.0, 1.0)
         if self.algorithm == "sac":
             mean, _, _ = policy.actor.get_action_dist_params(observation)
             return torch.tanh(mean)

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from stable_baselines3.common.policies import ActorCriticPolicy
 
 from common.actions import ACTION_SPACE
 from common.curriculum.policy_file import MANIFEST, Manifest, PolicyFile
@@ -33,6 +34,36 @@ def algorithm_class(name: str):
     from stable_baselines3 import PPO, SAC, TD3
 
     return {"ppo": PPO, "sac": SAC, "td3": TD3}[name]
+
+
+def policy_class(algorithm: str):
+    """The policy class a stage trains and a manifest rebuilds: stable-baselines3's MlpPolicy, and
+    for PPO :class:`NavActorCriticPolicy` (the same network, able to bound its mean)."""
+    return NavActorCriticPolicy if algorithm == "ppo" else algorithm_class(algorithm).policy_aliases["MlpPolicy"]
+
+
+class NavActorCriticPolicy(ActorCriticPolicy):
+    """PPO's MlpPolicy, and with ``bounded_mean`` its Gaussian's mean squashed into [-1, 1] by tanh.
+
+    The action space clips what PPO samples. Its plain Gaussian mean can drift past a bound
+    where every sample is clipped alike, so the gradient no longer tells it to come back: the
+    deterministic action then stays at the bound (full speed beside an obstacle, or standing
+    still where training's noise would have crept on; docs/training.md). A bounded mean keeps
+    the distribution's centre inside the actions it can take. The network and its weights are
+    SB3's own: only where the mean is read changes.
+    """
+
+    def __init__(self, *args, bounded_mean: bool = False, **kwargs) -> None:
+        self.bounded_mean = bounded_mean
+        super().__init__(*args, **kwargs)
+
+    def _get_action_dist_from_latent(self, latent_pi: torch.Tensor):
+        if not self.bounded_mean:
+            return super()._get_action_dist_from_latent(latent_pi)
+        return self.action_dist.proba_distribution(torch.tanh(self.action_net(latent_pi)), self.log_std)
+
+    def _get_constructor_parameters(self) -> dict[str, Any]:
+        return {**super()._get_constructor_parameters(), "bounded_mean": self.bounded_mean}
 
 
 def vec_env_class(name: str):
@@ -68,6 +99,8 @@ def network_parameters(manifest: Manifest, source: str | Path | None = None) -> 
     field = f"{MANIFEST}: policy_kwargs"
     obs = int(observation_space(manifest).shape[0])
     act = int(ACTION_SPACE.shape[0])
+    if algorithm != "ppo" and kwargs.bounded_mean is not None:
+        raise ConfigError(source, f"{field}.bounded_mean", "bounds a PPO policy's Gaussian mean; allowed: ppo")
     if algorithm == "ppo":
         if kwargs.n_critics is not None:
             raise ConfigError(source, f"{field}.n_critics", "a PPO policy has no critics to count; allowed: sac, td3")
@@ -128,8 +161,7 @@ def build_policy(manifest: Manifest, device: str = "cpu", initialise: bool = Tru
         kwargs["use_sde"] = manifest.use_sde
     if manifest.algorithm == "ppo" and not initialise:
         kwargs["ortho_init"] = False
-    policy_class = algorithm_class(manifest.algorithm).policy_aliases["MlpPolicy"]
-    policy = policy_class(observation_space(manifest), ACTION_SPACE, lambda _: 0.0, **kwargs)
+    policy = policy_class(manifest.algorithm)(observation_space(manifest), ACTION_SPACE, lambda _: 0.0, **kwargs)
     return policy.to(device)
 
 

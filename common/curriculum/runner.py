@@ -25,7 +25,7 @@ from common.atomic import atomic_write
 from common.conditions import conditions_of
 from common.curriculum.comparison import write_csv
 from common.curriculum.hyperparams import resolve_hyperparams
-from common.curriculum.policy import algorithm_class, load_weights, vec_env_class
+from common.curriculum.policy import algorithm_class, load_weights, policy_class, vec_env_class
 from common.curriculum.policy_file import Normalizer, update_manifest
 from common.curriculum.replay import load_replay
 from common.curriculum.run_directory import (LOCK_NAME, MARKER, EvalLog, StagePaths, check_claimable, clear_unstarted,
@@ -235,7 +235,7 @@ class Runner:
         resuming = self.resume and paths.last.exists()
         if stage.normalize:
             venv = VecNormalize(venv, norm_obs=True, norm_reward=False)
-        model = algorithm_class(stage.algorithm)("MlpPolicy", venv, seed=seed, device=self.device, verbose=0,
+        model = algorithm_class(stage.algorithm)(policy_class(stage.algorithm), venv, seed=seed, device=self.device, verbose=0,
                                                  tensorboard_log=str(paths.tensorboard),
                                                  **resolve_hyperparams(stage.hyperparams))
         # Both a resume and init_from load weights (never pickles) into the model the curriculum describes.

@@ -193,6 +193,9 @@ def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
             raise ConfigError(source, f"{field}.hyperparams.{key}",
                               f"not a {stage.algorithm.upper()} argument; allowed: {', '.join(sorted(allowed))}")
     resolve_hyperparams(stage.hyperparams, source=source, field=f"{field}.hyperparams")
+    if stage.algorithm != "ppo" and "bounded_mean" in stage.hyperparams.get("policy_kwargs", {}):
+        raise ConfigError(source, f"{field}.hyperparams.policy_kwargs.bounded_mean",
+                          f"bounds a PPO policy's Gaussian mean; allowed: algorithm ppo (this stage's: {stage.algorithm})")
     _check_env_kwargs(stage, source, f"{field}.env_kwargs")
     if stage.init_from == "previous" and index == 0:
         raise ConfigError(source, f"{field}.init_from", "the first stage has no previous stage; allowed: null or a policy path")
