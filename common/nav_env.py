@@ -14,7 +14,8 @@ import numpy as np
 from common.actions import ActionMapping
 from common.kinematics import wrap_angle
 from common.observations import DEFAULT_GOAL_DISTANCE_SCALE, ObservationLayout, make_layout
-from common.readings import Readings, nearest_return
+from common.readings import Readings, nearest_clearance, nearest_return
+from common.robots import footprint_reach
 from common.rewards import Reward, StepContext
 from common.conditions import Conditions
 from common.scenario import Scenario
@@ -95,6 +96,7 @@ class NavigationEnv(gym.Env):
                                  "scenarios must share the robot's kinematics")
             self.layout = self._make_layout(scenario)
             self.actions = ActionMapping(scenario.robot, self.action_mapping)
+            self._reach = footprint_reach(scenario.robot, scenario.lidar)
         self._goal = scenario.goal
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
@@ -132,7 +134,8 @@ class NavigationEnv(gym.Env):
         reached = outcome == "success"
         x, y, yaw = readings.pose
         bearing = wrap_angle(math.atan2(self._goal[1] - y, self._goal[0] - x) - yaw)
-        ctx = StepContext(task.distance, previous, bearing, v, w, nearest_return(readings.lidar), readings.collided, reached)
+        ctx = StepContext(task.distance, previous, bearing, v, w, nearest_return(readings.lidar), readings.collided, reached,
+                          nearest_clearance(readings.lidar, self._reach))
         reward, shares = self.reward(ctx)
         # A crash is a termination, not a truncation: its value must not bootstrap from the next state.
         terminated = reached or outcome == "collision"

@@ -52,8 +52,13 @@ the robot drives; with 180 beams, 4 % (``tests/test_motion_layout.py``; the ``li
 condition sets the beams). It is the one layout with memory: :meth:`ObservationLayout.reset`
 starts it afresh (the env and a policy agent do, every episode).
 
-``lidar49_robot``: as ``lidar43_log``, then the robot itself, so one policy can drive robots of
-other sizes and limits (the ``robot_family`` condition trains it on them):
+``lidar49_robot``: for one policy that drives robots of other sizes, shapes and limits (the
+``robot_family`` condition trains it on them). Its 36 sectors read the robot's *clearance*, not
+the range: each beam's return less how far the beam runs inside the footprint (a box is wider
+than long ahead and narrower to the side), log(c / d0 + 1) / log(range_max / d0 + 1) with
+d0 = 5 cm, so 0 is touching and the first 10 cm, where a rectangle threads a gap 1.2 widths
+across, span a quarter of the scale (0.24; on ``lidar43_log``'s scale a box's sides read 0 as
+long as anything is within its bounding circle). Then the robot itself:
 
 ====  ==================================================================  ====  ===
 43    bounding radius / 0.5 m                                               0    1
@@ -259,6 +264,7 @@ def _range_rates(out, first, ranges, expected, bounds, elapsed, scale) -> None:
 
 
 ROBOT_SCALES = (0.5, 1.0, 1.0, 2.0, 3.0, 1.0)  # lidar49_robot's divisors of the robot's entries
+CLEARANCE_FLOOR = 0.05  # m: lidar49_robot's d0
 
 
 def robot_entries(robot: RobotProfile) -> np.ndarray:
@@ -269,16 +275,26 @@ def robot_entries(robot: RobotProfile) -> np.ndarray:
 
 
 def _robot_layout(robot: RobotProfile, lidar: LidarSpec, goal_distance_scale: float) -> ObservationLayout:
-    """``lidar49_robot``: ``lidar43_log`` and the robot's own entries (see the module)."""
-    scan = make_layout("lidar43_log", robot, lidar, goal_distance_scale)
+    """``lidar49_robot``: goal and motion as ``lidar43_log``, the sectors' clearance from the
+    footprint, and the robot's own entries (see the module)."""
+    from common.robots import footprint_reach
+
     size = 43 + len(ROBOT_SCALES)
-    low = np.concatenate([scan.space.low, np.zeros(len(ROBOT_SCALES), dtype=np.float32)])
+    low = np.concatenate([[-1, -1, -1, -1, -1, -1], np.zeros(size - 6)]).astype(np.float32)
     high = np.ones(size, dtype=np.float32)
     own = robot_entries(robot)
+    bounds = sector_bounds(lidar.beams, LIDAR43_BEAMS)
+    # _encode's log scale reads log(max(r, floor) / floor): given clearance + d0 and floor d0, that is log(c / d0 + 1).
+    shift = CLEARANCE_FLOOR - footprint_reach(robot, lidar)
+    log_scale = 1.0 / math.log(lidar.range_max / CLEARANCE_FLOOR + 1.0)
+    inv_v, inv_w = 1.0 / robot.v_max, 1.0 / robot.w_max
 
     def compute(readings: Readings, goal: tuple[float, float]) -> np.ndarray:
         out = np.empty(size, dtype=np.float32)
-        out[:43] = scan(readings, goal)
+        odometry = readings.odometry
+        _encode(out[:43], _goal_terms(readings, goal, goal_distance_scale), odometry.v * inv_v, odometry.w * inv_w,
+                readings.imu.angular_velocity[2] * inv_w, readings.lidar + shift, bounds, 0.0, CLEARANCE_FLOOR,
+                log_scale, low[:43], high[:43])
         out[43:] = own
         return out
 

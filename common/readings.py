@@ -103,6 +103,16 @@ def frozen(array: np.ndarray) -> np.ndarray:
 
 
 @kernel
+def nearest_clearance(ranges: np.ndarray, reach: np.ndarray) -> float:
+    """The robot's clearance: the smallest range less how far its beam runs inside the footprint
+    (:func:`common.robots.footprint_reach`)."""
+    nearest = math.inf
+    for i in range(ranges.shape[0]):
+        nearest = min(nearest, ranges[i] - reach[i])
+    return nearest
+
+
+@kernel
 def nearest_return(ranges: np.ndarray) -> float:
     """The smallest range of a scan (inf for none): ``ranges.min()`` costs five times more per step."""
     nearest = math.inf

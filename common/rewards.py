@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import collections
 import functools
+import math
 from pathlib import Path
 from typing import Any, Callable, Mapping, NamedTuple
 
@@ -29,6 +30,7 @@ class StepContext(NamedTuple):
     min_range: float  # nearest lidar return, m
     collided: bool
     reached: bool
+    clearance: float = math.inf  # nearest return less how far its beam runs inside the footprint, m
 
 
 def progress(ctx: StepContext, positive_only: bool = False) -> float:
@@ -60,6 +62,12 @@ def time(ctx: StepContext) -> float:
 def proximity(ctx: StepContext, threshold: float = 0.3) -> float:
     """How far the nearest lidar return is inside ``threshold`` metres (0 outside it)."""
     return max(0.0, threshold - ctx.min_range)
+
+
+def clearance(ctx: StepContext, threshold: float = 0.3) -> float:
+    """How far the robot's clearance (from its footprint, not its centre) is inside ``threshold``
+    metres: ``proximity`` for robots of every shape and size."""
+    return max(0.0, threshold - ctx.clearance)
 
 
 def near_speed(ctx: StepContext, threshold: float = 0.5) -> float:
@@ -106,6 +114,7 @@ TERMS: dict[str, Callable[..., Any]] = {
     "time": time,
     "stuck": _Stuck,
     "proximity": proximity,
+    "clearance": clearance,
     "near_speed": near_speed,
     "proximity_bands": proximity_bands,
     "spin": spin,

@@ -1,5 +1,6 @@
-"""Named robot profiles, so a curriculum or a command line can ask for a robot by name, and
-families of robots drawn per episode (the ``robot_family`` condition).
+"""Named robot profiles, so a curriculum or a command line can ask for a robot by name,
+families of robots drawn per episode (the ``robot_family`` condition), and how far each lidar
+beam runs inside the robot before it reaches the world (:func:`footprint_reach`).
 
 ``physics3d`` is the 3D tier's URDF robot (``physics3d/assets/diff_drive.urdf``) as a profile:
 its footprint (body and wheels, 0.3 × 0.24 m), wheels and the 3D tutorial's limits. It lives here,
@@ -14,7 +15,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from common.errors import ConfigError, quote
-from common.scenario import RobotProfile
+from common.scenario import LidarSpec, RobotProfile
 
 WHEEL_RADIUS = 0.05  # m, as in the URDF (tests/test_physics3d.py checks the two agree)
 WHEEL_BASE = 0.22  # m, between the wheels' mid-planes
@@ -83,3 +84,32 @@ class RobotFamily(BaseModel):
         limits = {"v_max": float(rng.uniform(*self.v_max)), "w_max": float(rng.uniform(*self.w_max))}
         return (base or RobotProfile()).model_copy(update={"shape": shape, **size, **limits})
 
+
+
+def footprint_reach(robot: RobotProfile, lidar: LidarSpec) -> np.ndarray:
+    """Per beam, in scan order: how far the beam runs from the sensor to the footprint's edge, m
+    (0 where the sensor sits outside every part that beam crosses). A return at range r is
+    r minus this from the robot: what a robot of any shape needs to judge a gap by."""
+    x, y, yaw = lidar.offset
+    angles = yaw + lidar.beam_angles()
+    directions = np.column_stack([np.cos(angles), np.sin(angles)])
+    reach = np.zeros(len(angles))
+    for part in robot.outline:
+        if part.radius is not None:
+            # |o + t d - c| = R: the larger root is where the beam leaves the circle.
+            offset = np.array([x, y]) - np.asarray(part.center, dtype=float)
+            along = directions @ offset
+            disc = along**2 - (offset @ offset - part.radius**2)
+            exits = np.where(disc >= 0.0, -along + np.sqrt(np.maximum(disc, 0.0)), 0.0)
+        else:
+            starts = np.asarray(part.vertices, dtype=float)
+            edges = np.roll(starts, -1, axis=0) - starts
+            rel = starts - np.array([x, y])
+            # Beam o + t d meets edge s + u e: solve t d - u e = s - o for each beam and edge.
+            cross = directions[:, None, 0] * edges[None, :, 1] - directions[:, None, 1] * edges[None, :, 0]
+            safe = np.where(np.abs(cross) > 1e-12, cross, np.inf)
+            t = (rel[None, :, 0] * edges[None, :, 1] - rel[None, :, 1] * edges[None, :, 0]) / safe
+            u = (rel[None, :, 0] * directions[:, None, 1] - rel[None, :, 1] * directions[:, None, 0]) / safe
+            exits = np.where((u >= 0.0) & (u <= 1.0) & (t >= 0.0), t, 0.0).max(axis=1)
+        reach = np.maximum(reach, np.maximum(exits, 0.0))
+    return reach

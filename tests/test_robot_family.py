@@ -99,3 +99,69 @@ def test_a_robot_on_the_command_line_drives_instead_of_a_policys_family_and_the_
     args = SimpleNamespace(env_kwargs=[("robot_family", True)], world="flatland")
     given = _conditions(args, [one_robot_policy]).given()
     assert "robot" not in given and given["robot_family"]["shapes"] == ["circle", "box"]
+
+
+def test_a_beam_runs_inside_the_footprint_as_far_as_its_edge():
+    import math
+
+    from common.robots import footprint_reach
+
+    lidar = LidarSpec(beams=8)  # full circle: beams at ±22.5°, ±67.5°, ±112.5°, ±157.5°
+    angles = np.abs(lidar.beam_angles())
+    box = RobotProfile(shape="box", length=0.51, width=0.43)
+    expected = np.minimum(0.255 / np.abs(np.cos(angles)), 0.215 / np.abs(np.sin(angles)))
+    np.testing.assert_allclose(footprint_reach(box, lidar), expected)
+    np.testing.assert_allclose(footprint_reach(RobotProfile(radius=0.25), lidar), 0.25)
+    # A lidar mounted 0.1 m ahead: nearer the front edge, farther from the back.
+    ahead = LidarSpec(beams=2, angle_range=math.pi, offset=(0.1, 0.0, 0.0))  # beams at -90° and +90°
+    forward = LidarSpec(beams=1, offset=(0.1, 0.0, 0.0))
+    backward = LidarSpec(beams=1, offset=(0.1, 0.0, math.pi))
+    assert footprint_reach(box, forward)[0] == pytest.approx(0.155)
+    assert footprint_reach(box, backward)[0] == pytest.approx(0.355)
+    np.testing.assert_allclose(footprint_reach(box, ahead), 0.215)
+
+
+def test_lidar49_robot_reads_the_clearance_from_the_footprint_not_the_range():
+    """A box 0.51 x 0.43 m with a wall 5 cm off its left side and 0.5 m ahead of its front: the
+    left sector reads log(2) / log(101) (5 cm of clearance), the front one log(11) / log(101)."""
+    import math
+
+    from common.kinematics import Pose2D
+    from common.readings import Imu, Odometry, Readings
+
+    box = RobotProfile(shape="box", length=0.51, width=0.43)
+    lidar = LidarSpec(beams=360)
+    angles = lidar.beam_angles()
+    # Ranges to the two walls: y = 0.215 + 0.05 on the left, x = 0.255 + 0.5 ahead.
+    with np.errstate(divide="ignore"):
+        left = np.where(np.sin(angles) > 0, 0.265 / np.sin(angles), np.inf)
+        front = np.where(np.cos(angles) > 0, 0.755 / np.cos(angles), np.inf)
+    ranges = np.minimum(np.minimum(left, front), lidar.range_max)
+    pose = Pose2D(0.0, 0.0, 0.0)
+    readings = Readings(pose=pose, velocity=(0.0, 0.0), odometry=Odometry(pose, 0.0, 0.0), lidar=ranges,
+                        imu=Imu((0.0, 0.0, 0.0), (0.0, 0.0, 0.0)), collided=False, time=0.0)
+    obs = make_layout("lidar49_robot", box, lidar)(readings, (5.0, 0.0))
+    sectors = obs[6:42]
+    scale = math.log(5.0 / 0.05 + 1.0)
+    assert sectors[27] == pytest.approx(math.log(2.0) / scale, abs=2e-3)  # the sector about +90°
+    assert sectors[18] == pytest.approx(math.log(11.0) / scale, abs=2e-3)  # the sector about 0°
+    # On lidar43_log's scale the same left wall lies inside the bounding circle: it reads 0.
+    assert make_layout("lidar43_log", box, lidar)(readings, (5.0, 0.0))[6 + 27] == 0.0
+
+
+def test_the_clearance_term_prices_closeness_from_the_footprint():
+    from common.rewards import StepContext, clearance
+
+    ctx = StepContext(distance=2.0, prev_distance=2.0, heading_error=0.0, v=0.5, w=0.0, min_range=0.3,
+                      collided=False, reached=False, clearance=0.05)
+    assert clearance(ctx, threshold=0.3) == pytest.approx(0.25)
+    assert clearance(ctx._replace(clearance=0.4), threshold=0.3) == 0.0
+    env = gym.make("flatland/Nav-v0", world="passages", observation="lidar49_robot", robot_family=True,
+                   reward={"progress": 10.0, "clearance": {"weight": -1.0, "threshold": 10.0}})
+    env.reset(seed=0)
+    _, _, _, _, info = env.step(np.zeros(2, dtype=np.float32))
+    unwrapped = env.unwrapped
+    from common.robots import footprint_reach
+
+    least = float((unwrapped._readings.lidar - footprint_reach(unwrapped.scenario.robot, unwrapped.scenario.lidar)).min())
+    assert info["reward_terms"]["clearance"] == pytest.approx(-(10.0 - least))

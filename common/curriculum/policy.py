@@ -243,7 +243,7 @@ def load_weights(model, path: str | Path, policy_only: bool) -> PolicyFile | Non
 
 # A layout that extends another (the same entries first, more after it): a policy trained on the
 # shorter one starts a stage on the longer one, reading the new entries with zero weights.
-EXTENDS = {"lidar79_motion": "lidar43_log", "lidar49_robot": "lidar43_log"}
+EXTENDS = {"lidar79_motion": "lidar43_log"}
 
 
 def widened(state: dict, file: PolicyFile, size: int) -> dict:
