@@ -292,3 +292,12 @@ class FootprintGrid:
                 return False
             previous = math.atan2(points[i + 1, 1] - points[i, 1], points[i + 1, 0] - points[i, 0])
         return True
+
+
+def kernel_arrays(grid: "OccupancyGrid | FootprintGrid") -> tuple:
+    """What the planners' kernels take: a footprint grid's :attr:`FootprintGrid.arrays`, or for an
+    inflated grid (a point robot) its cells with an empty field, no discs and no boxes."""
+    if isinstance(grid, FootprintGrid):
+        return grid.arrays
+    return (np.empty((0, 0)), np.ascontiguousarray(grid.occupied, dtype=np.bool_), float(grid.origin[0]),
+            float(grid.origin[1]), float(grid.resolution), np.empty((0, 2)), np.empty(0), 0, np.empty((0, 4)), 0.0)

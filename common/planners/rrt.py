@@ -14,9 +14,9 @@ import numpy as np
 
 from common.kernel_cache import kernel
 from common.occupancy import OccupancyGrid
-from common.planners.base import Point, grid_arrays
+from common.planners.base import Point
 from common.planners.collision import segment_free_sampled
-from common.planners.footprint import FootprintGrid, segment_free, turn_free
+from common.planners.footprint import FootprintGrid, kernel_arrays, segment_free, turn_free
 
 
 @kernel
@@ -127,11 +127,6 @@ class RRT:
         if not (grid.is_free(*s) and grid.is_free(*g)):
             return None
         draws = self.rng.random((self.max_iterations, 3))
-        if isinstance(grid, FootprintGrid):
-            arrays = grid.arrays
-            heading = float(start[2]) if len(start) > 2 else math.nan
-        else:  # no field: the edges are checked on the grid's cells alone
-            arrays = (np.empty((0, 0)), *grid_arrays(grid), np.empty((0, 2)), np.empty(0), 0, np.empty((0, 4)), 0.0)
-            heading = math.nan
-        path = _rrt(*arrays, s, heading, g, draws, self.goal_bias, self.step_size)
+        heading = float(start[2]) if isinstance(grid, FootprintGrid) and len(start) > 2 else math.nan
+        path = _rrt(*kernel_arrays(grid), s, heading, g, draws, self.goal_bias, self.step_size)
         return path if len(path) else None

@@ -9,14 +9,17 @@ import numpy as np
 
 from common.kernel_cache import kernel
 from common.occupancy import OccupancyGrid
-from common.planners.base import grid_arrays
 from common.planners.collision import line_of_sight
-from common.planners.footprint import FootprintGrid, corner_free, pose_clearance, segment_free
+from common.planners.footprint import FootprintGrid, corner_free, kernel_arrays, pose_clearance, segment_free
 
 
 @kernel
-def _shortcut(occupied: np.ndarray, x0: float, y0: float, resolution: float, points: np.ndarray) -> np.ndarray:
-    """Indices of the kept waypoints: from each kept point, the farthest one in line of sight."""
+def _shortcut(field: np.ndarray, occupied: np.ndarray, x0: float, y0: float, resolution: float, centres: np.ndarray,
+              radii: np.ndarray, exact: int, boxes: np.ndarray, margin: float, points: np.ndarray,
+              heading: float) -> np.ndarray:
+    """Indices of the kept waypoints: from each kept point, the farthest one in line of sight on
+    ``occupied`` (an empty ``field``), or the farthest one the footprint can turn to (from
+    ``heading``, NaN: any) and drive straight to, arriving there heading along the segment."""
     n = points.shape[0]
     keep = np.empty(n, dtype=np.int64)
     keep[0] = 0
@@ -26,30 +29,11 @@ def _shortcut(occupied: np.ndarray, x0: float, y0: float, resolution: float, poi
         j = n - 1
         # The next waypoint is always kept as a fallback, so an input segment that fails the
         # exact check (e.g. a sampled RRT edge clipping a corner) is never made worse.
-        while j > i + 1 and not line_of_sight(occupied, x0, y0, resolution,
-                                              points[i, 0], points[i, 1], points[j, 0], points[j, 1]):
-            j -= 1
-        keep[kept] = j
-        kept += 1
-        i = j
-    return keep[:kept]
-
-
-@kernel
-def _shortcut_footprint(field: np.ndarray, occupied: np.ndarray, x0: float, y0: float, resolution: float,
-                        centres: np.ndarray, radii: np.ndarray, exact: int, boxes: np.ndarray, margin: float,
-                        points: np.ndarray, heading: float) -> np.ndarray:
-    """As :func:`_shortcut`, for a footprint: from each kept point, the farthest one the robot can
-    turn to and drive straight to, arriving there heading along the segment."""
-    n = points.shape[0]
-    keep = np.empty(n, dtype=np.int64)
-    keep[0] = 0
-    kept = 1
-    i = 0
-    while i < n - 1:
-        j = n - 1
-        while j > i + 1 and not corner_free(field, occupied, x0, y0, resolution, centres, radii, exact, boxes, margin,
-                                            points, heading, i, j):
+        while j > i + 1 and not (
+                line_of_sight(occupied, x0, y0, resolution, points[i, 0], points[i, 1], points[j, 0], points[j, 1])
+                if field.size == 0 else
+                corner_free(field, occupied, x0, y0, resolution, centres, radii, exact, boxes, margin, points, heading,
+                            i, j)):
             j -= 1
         keep[kept] = j
         kept += 1
@@ -66,9 +50,7 @@ def shortcut(grid: OccupancyGrid | FootprintGrid, path: np.ndarray, heading: flo
     points = np.ascontiguousarray(path, dtype=float).reshape(-1, 2)
     if len(points) < 3:
         return points.copy()
-    if isinstance(grid, FootprintGrid):
-        return points[_shortcut_footprint(*grid.arrays, points, math.nan if heading is None else float(heading))]
-    return points[_shortcut(*grid_arrays(grid), points)]
+    return points[_shortcut(*kernel_arrays(grid), points, math.nan if heading is None else float(heading))]
 
 
 @kernel
