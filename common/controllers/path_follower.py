@@ -100,6 +100,7 @@ class PathFollower(Controller):
         self.planner = planner(seed=self.seed) if self.default_planner == "rrt" else planner()
         self.mapper: ScanMapper | None = None
         self._grid: FootprintGrid | None = None
+        self._stale = False
         self.path: np.ndarray | None = None
         self.target = 0
         self.since_plan = 0
@@ -107,9 +108,10 @@ class PathFollower(Controller):
 
     @property
     def grid(self) -> FootprintGrid:
-        """The footprint's view of the map (rebuilt after new returns)."""
-        if self._grid is None:
-            self._grid = FootprintGrid(self.mapper.grid, self.footprint, self.clearance)
+        """The footprint's view of the map, rebuilt if returns came since (a distance transform of
+        the whole map: the planner and the check of a threatened path need it, the speed does not)."""
+        if self._grid is None or self._stale:
+            self._grid, self._stale = FootprintGrid(self.mapper.grid, self.footprint, self.clearance), False
         return self._grid
 
     def _make_mapper(self, x: float, y: float, goal: tuple[float, float]) -> ScanMapper:
@@ -125,7 +127,7 @@ class PathFollower(Controller):
         new = points[keep & ~self.mapper.observed[rows, cols]]
         if len(new):
             self.mapper.add_points(new)
-            self._grid = None
+            self._stale = True
         return new
 
     def _blocked(self, new: np.ndarray, x: float, y: float) -> bool:
@@ -172,8 +174,9 @@ class PathFollower(Controller):
             self._plan(x, y, yaw, goal, keep=True)
         if self.path is None:
             return self.clip(0.0, self.k_angular * wrap_angle(math.atan2(goal[1] - y, goal[0] - x) - yaw))
-        # Tight: a short lookahead keeps the robot on the path's middle, and it slows to thread the gap.
-        room = min(max(self.grid.clearance(x, y, yaw) - self.clearance, 0.0) / self.open_clearance, 1.0)
+        # Tight: a short lookahead keeps the robot on the path's middle, and it slows to thread the gap
+        # (measured on the map as last planned or checked: a return seen since is at least a step away).
+        room = min(max(self._grid.clearance(x, y, yaw) - self.clearance, 0.0) / self.open_clearance, 1.0)
         tx, ty = self._lookahead_point(x, y, max(0.3 * self.lookahead, room * self.lookahead))
         alpha = wrap_angle(math.atan2(ty - y, tx - x) - yaw)
         if abs(alpha) > self.turn_in_place:
