@@ -101,6 +101,7 @@ class PathFollower(Controller):
         self.mapper: ScanMapper | None = None
         self._grid: FootprintGrid | None = None
         self._stale = False
+        self._turning = 0.0  # the way it turns on the spot: +1 left, -1 right, 0 not turning
         self.path: np.ndarray | None = None
         self.target = 0
         self.since_plan = 0
@@ -180,7 +181,14 @@ class PathFollower(Controller):
         tx, ty = self._lookahead_point(x, y, max(0.3 * self.lookahead, room * self.lookahead))
         alpha = wrap_angle(math.atan2(ty - y, tx - x) - yaw)
         if abs(alpha) > self.turn_in_place:
-            return self.clip(0.0, self.k_angular * alpha)  # forward-only: face the path before driving
+            # Forward-only: face the path before driving, and keep turning the way the turn began
+            # while the path lies behind: a point behind flips from one side to the other as the
+            # lookahead shortens and lengthens, and the robot would rock on the spot.
+            if self._turning and abs(alpha) > 0.5 * math.pi:
+                alpha = math.copysign(abs(alpha), self._turning)
+            self._turning = math.copysign(1.0, alpha)
+            return self.clip(0.0, self.k_angular * alpha)
+        self._turning = 0.0
         # Pure pursuit: the arc through the lookahead point has curvature 2 sin(alpha) / L. Slow down
         # until w_max can hold that arc, or the robot swings wide of the path at full speed.
         curvature = 2.0 * math.sin(alpha) / max(math.hypot(tx - x, ty - y), 1e-6)
