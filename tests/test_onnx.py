@@ -200,4 +200,4 @@ def test_the_documented_robot_loop_runs_on_onnxruntime_alone_and_arrives(exporte
     assert not {m for m in loaded if m.split(".")[0] in ("torch", "stable_baselines3", "pymunk", "pybullet")}
     assert lines[-2] == "arrived"
     commands = [line for line in lines if line.startswith("t=")]
-    assert 20 < len(commands) < 100  # it drove, and arrived before the loop ran out
+    assert 20 < len(commands) < 300  # it drove, and arrived before the loop ran out
