@@ -1,5 +1,5 @@
-"""Fault injection for the sweep tests: a trial whose process dies once, after its first checkpoint; a
-trial that fails outright."""
+"""Trainables the sweep tests inject: a trial whose process dies once, after its first checkpoint; a
+trial that fails outright; a trial that records the niceness it runs at."""
 
 from __future__ import annotations
 
@@ -43,3 +43,9 @@ def fail_first_to_start(config: dict) -> None:
         run_trial(config)
     finally:
         tune.report = report  # a reused worker runs its next trial as usual
+
+
+def record_niceness(config: dict) -> None:
+    """Run the trial, first writing the niceness its training thread runs at."""
+    (Path(config["sweep_dir"]) / f"niceness-seed{config['seed']}").write_text(str(os.getpriority(os.PRIO_PROCESS, 0)))
+    run_trial(config)

@@ -87,6 +87,20 @@ def test_trials_spread_over_the_nodes_of_a_cluster(tmp_path):
 
 
 @pytest.mark.slow
+def test_trials_run_at_the_niceness_of_the_user_who_started_them(tmp_path, monkeypatch):
+    # Ray's default, 15, starves a sweep beside any other work on the machine.
+    from common.curriculum.sweep import run_sweep
+    from tests.sweep_faults import record_niceness
+
+    monkeypatch.setenv("PYTHONPATH", str(ROOT))
+    monkeypatch.delenv("RAY_worker_niceness", raising=False)
+    out = tmp_path / "sweep"
+    results = run_sweep(TINY, out, seeds=1, trainable=record_niceness)
+    assert results["trials"][0]["status"] == "done"
+    assert int((out / "niceness-seed0").read_text()) == os.getpriority(os.PRIO_PROCESS, 0)
+
+
+@pytest.mark.slow
 def test_a_trial_whose_process_dies_is_retried_from_its_checkpoint(tmp_path, monkeypatch):
     from common.curriculum.sweep import run_sweep
     from tests.sweep_faults import crash_once

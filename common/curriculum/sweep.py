@@ -261,6 +261,11 @@ def run_sweep(source: str | Path, out: Path, seeds: int = 1, space: str | Path |
     trainable = trainable or run_trial
     # Tune's newer console output ignores verbose=0; the runs' own reports are what users read.
     os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")
+    # Ray starts its workers at niceness 15, as for background chores. Trials are the user's main
+    # job: at 15, anything else on the machine starves them (a trial got 6% of a core beside two
+    # other processes on 2 cores). The local cluster's raylet reads this; an --address cluster
+    # keeps its own setting.
+    os.environ.setdefault("RAY_worker_niceness", "0")
     import ray
     from ray import tune
 
