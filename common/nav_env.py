@@ -96,7 +96,8 @@ class NavigationEnv(gym.Env):
                                  "scenarios must share the robot's kinematics")
             self.layout = self._make_layout(scenario)
             self.actions = ActionMapping(scenario.robot, self.action_mapping)
-            self._reach = footprint_reach(scenario.robot, scenario.lidar)
+            # Per beam, how far it runs inside the footprint: only a reward that prices clearance reads it.
+            self._reach = footprint_reach(scenario.robot, scenario.lidar) if "clearance" in self.reward.spec else None
         self._goal = scenario.goal
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
@@ -134,8 +135,9 @@ class NavigationEnv(gym.Env):
         reached = outcome == "success"
         x, y, yaw = readings.pose
         bearing = wrap_angle(math.atan2(self._goal[1] - y, self._goal[0] - x) - yaw)
+        clearance = math.inf if self._reach is None else nearest_clearance(readings.lidar, self._reach)
         ctx = StepContext(task.distance, previous, bearing, v, w, nearest_return(readings.lidar), readings.collided, reached,
-                          nearest_clearance(readings.lidar, self._reach))
+                          clearance)
         reward, shares = self.reward(ctx)
         # A crash is a termination, not a truncation: its value must not bootstrap from the next state.
         terminated = reached or outcome == "collision"

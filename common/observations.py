@@ -87,6 +87,7 @@ from common.geometry import sensor_origin
 from common.kernel_cache import kernel
 from common.kinematics import wrap_angle
 from common.readings import Readings
+from common.robots import footprint_reach
 from common.scenario import LidarSpec, RobotProfile
 
 LAYOUTS = ("nav7", "lidar43", "lidar43_log", "lidar79_motion", "lidar49_robot")
@@ -186,21 +187,31 @@ def make_layout(
     elif name == "lidar49_robot":
         return _robot_layout(robot, lidar, goal_distance_scale)
     elif name in ("lidar43", "lidar43_log"):
-        low = np.concatenate([[-1, -1, -1, -1, -1, -1], np.zeros(LIDAR43_BEAMS + 1)]).astype(np.float32)
-        high = np.ones(43, dtype=np.float32)
-        bounds = sector_bounds(lidar.beams, LIDAR43_BEAMS)
         floor = min(robot.bounding_radius, 0.5 * lidar.range_max)
         log_scale = 1.0 / math.log(lidar.range_max / floor) if name == "lidar43_log" else 0.0
-
-        def compute(readings: Readings, goal: tuple[float, float]) -> np.ndarray:
-            out = np.empty(43, dtype=np.float32)
-            odometry = readings.odometry
-            _encode(out, _goal_terms(readings, goal, goal_distance_scale), odometry.v * inv_v, odometry.w * inv_w,
-                    readings.imu.angular_velocity[2] * inv_w, readings.lidar, bounds, inv_r, floor, log_scale, low, high)
-            return out
-
+        return _sector_layout(name, robot, lidar, goal_distance_scale, inv_r, floor, log_scale)
     else:
         raise ConfigError(None, "observation", f"unknown layout {quote(name)}; allowed: {', '.join(LAYOUTS)}")
+    return ObservationLayout(name, spaces.Box(low, high, dtype=np.float32), compute)
+
+
+def _sector_layout(name: str, robot: RobotProfile, lidar: LidarSpec, goal_distance_scale: float, inv_range: float,
+                   floor: float, log_scale: float, shift: np.ndarray | None = None) -> ObservationLayout:
+    """The 43 entries of ``lidar43`` (goal, motion and 36 sectors; :func:`_encode` says how the
+    sectors read), each beam's range plus ``shift`` where given (``lidar49_robot``'s clearance)."""
+    low = np.concatenate([[-1, -1, -1, -1, -1, -1], np.zeros(LIDAR43_BEAMS + 1)]).astype(np.float32)
+    high = np.ones(43, dtype=np.float32)
+    bounds = sector_bounds(lidar.beams, LIDAR43_BEAMS)
+    inv_v, inv_w = 1.0 / robot.v_max, 1.0 / robot.w_max
+
+    def compute(readings: Readings, goal: tuple[float, float]) -> np.ndarray:
+        out = np.empty(43, dtype=np.float32)
+        odometry = readings.odometry
+        ranges = readings.lidar if shift is None else readings.lidar + shift
+        _encode(out, _goal_terms(readings, goal, goal_distance_scale), odometry.v * inv_v, odometry.w * inv_w,
+                readings.imu.angular_velocity[2] * inv_w, ranges, bounds, inv_range, floor, log_scale, low, high)
+        return out
+
     return ObservationLayout(name, spaces.Box(low, high, dtype=np.float32), compute)
 
 
@@ -277,24 +288,17 @@ def robot_entries(robot: RobotProfile) -> np.ndarray:
 def _robot_layout(robot: RobotProfile, lidar: LidarSpec, goal_distance_scale: float) -> ObservationLayout:
     """``lidar49_robot``: goal and motion as ``lidar43_log``, the sectors' clearance from the
     footprint, and the robot's own entries (see the module)."""
-    from common.robots import footprint_reach
-
-    size = 43 + len(ROBOT_SCALES)
-    low = np.concatenate([[-1, -1, -1, -1, -1, -1], np.zeros(size - 6)]).astype(np.float32)
-    high = np.ones(size, dtype=np.float32)
-    own = robot_entries(robot)
-    bounds = sector_bounds(lidar.beams, LIDAR43_BEAMS)
     # _encode's log scale reads log(max(r, floor) / floor): given clearance + d0 and floor d0, that is log(c / d0 + 1).
-    shift = CLEARANCE_FLOOR - footprint_reach(robot, lidar)
-    log_scale = 1.0 / math.log(lidar.range_max / CLEARANCE_FLOOR + 1.0)
-    inv_v, inv_w = 1.0 / robot.v_max, 1.0 / robot.w_max
+    sectors = _sector_layout("lidar49_robot", robot, lidar, goal_distance_scale, 0.0, CLEARANCE_FLOOR,
+                             1.0 / math.log(lidar.range_max / CLEARANCE_FLOOR + 1.0),
+                             shift=CLEARANCE_FLOOR - footprint_reach(robot, lidar))
+    low = np.concatenate([sectors.space.low, np.zeros(len(ROBOT_SCALES), dtype=np.float32)])
+    high = np.ones(len(low), dtype=np.float32)
+    own = robot_entries(robot)
 
     def compute(readings: Readings, goal: tuple[float, float]) -> np.ndarray:
-        out = np.empty(size, dtype=np.float32)
-        odometry = readings.odometry
-        _encode(out[:43], _goal_terms(readings, goal, goal_distance_scale), odometry.v * inv_v, odometry.w * inv_w,
-                readings.imu.angular_velocity[2] * inv_w, readings.lidar + shift, bounds, 0.0, CLEARANCE_FLOOR,
-                log_scale, low[:43], high[:43])
+        out = np.empty(len(low), dtype=np.float32)
+        out[:43] = sectors(readings, goal)
         out[43:] = own
         return out
 

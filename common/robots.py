@@ -85,7 +85,6 @@ class RobotFamily(BaseModel):
         return (base or RobotProfile()).model_copy(update={"shape": shape, **size, **limits})
 
 
-
 def footprint_reach(robot: RobotProfile, lidar: LidarSpec) -> np.ndarray:
     """Per beam, in scan order: how far the beam runs from the sensor to the footprint's edge, m
     (0 where the sensor sits outside every part that beam crosses). A return at range r is

@@ -216,12 +216,15 @@ def test_a_bounded_mean_ppo_policy_acts_on_the_tanh_of_its_mean_and_loads_back_b
     assert np.allclose(plain.predict(observation, deterministic=True)[0], [1.0, -1.0])
 
 
-def test_bounded_mean_is_ppos_alone():
+@pytest.mark.parametrize(("algorithm", "kwargs", "problem"), [
+    ("sac", {"bounded_mean": True}, "bounded_mean: bounds a PPO policy's Gaussian mean; allowed: ppo (this stage's: sac)"),
+    ("ppo", {"n_critics": 2}, "n_critics: a PPO policy has no critics to count; allowed: sac, td3 (this stage's: ppo)")])
+def test_a_curriculum_refuses_policy_kwargs_its_algorithm_does_not_take(algorithm, kwargs, problem):
+    # Without the check stable-baselines3 raises a TypeError when the stage starts training.
     from common.curriculum.schema import curriculum_from_mapping
 
-    stage = {"name": "s", "scenarios": {"kind": "open"}, "algorithm": "sac", "budget": 100,
-             "eval": {"suite": "open"}, "hyperparams": {"policy_kwargs": {"bounded_mean": True}}}
+    stage = {"name": "s", "scenarios": {"kind": "open"}, "algorithm": algorithm, "budget": 100,
+             "eval": {"suite": "open"}, "hyperparams": {"policy_kwargs": kwargs}}
     with pytest.raises(ConfigError) as error:
         curriculum_from_mapping({"name": "c", "stages": [stage]}, "c.yaml")
-    assert str(error.value) == ("c.yaml: stages.0.hyperparams.policy_kwargs.bounded_mean: bounds a PPO policy's "
-                                "Gaussian mean; allowed: algorithm ppo (this stage's: sac)")
+    assert str(error.value) == f"c.yaml: stages.0.hyperparams.policy_kwargs.{problem}"

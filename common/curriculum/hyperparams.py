@@ -67,6 +67,15 @@ class PolicyKwargs(BaseModel):
     # PPO: the Gaussian's mean squashed into [-1, 1] by tanh (common.curriculum.policy.NavActorCriticPolicy).
     bounded_mean: bool | None = None
 
+    def refused_by(self, algorithm: str) -> tuple[str, str] | None:
+        """The key ``algorithm``'s policy would refuse (SB3 with a TypeError deep inside training),
+        and why, or None: one rule for curricula and policy files alike."""
+        if algorithm == "ppo" and self.n_critics is not None:
+            return "n_critics", "a PPO policy has no critics to count; allowed: sac, td3"
+        if algorithm != "ppo" and self.bounded_mean is not None:
+            return "bounded_mean", "bounds a PPO policy's Gaussian mean; allowed: ppo"
+        return None
+
     def to_sb3(self) -> dict[str, Any]:
         """The keyword arguments stable-baselines3 takes (unset keys left to its defaults)."""
         out = self.model_dump(exclude_none=True)

@@ -2,8 +2,8 @@
 
 The graph is the deterministic action stable-baselines3's ``predict`` computes, with the
 observation normaliser folded in before it: PPO's Gaussian mean (its tanh with ``bounded_mean``)
-clipped to [-1, 1] (``predict`` clips to the action space), SAC's tanh of its mean, TD3's actor (a tanh already). Export goes
-through torch's own exporter (``torch.onnx.export`` with ``dynamo=True``: ``torch.export``, then
+clipped to [-1, 1] (``predict`` clips to the action space), SAC's tanh of its mean, TD3's actor
+(a tanh already). Export goes through torch's own exporter (``torch.onnx.export`` with ``dynamo=True``: ``torch.export``, then
 onnxscript's translation); the batch dimension stays free.
 """
 

@@ -99,11 +99,9 @@ def network_parameters(manifest: Manifest, source: str | Path | None = None) -> 
     field = f"{MANIFEST}: policy_kwargs"
     obs = int(observation_space(manifest).shape[0])
     act = int(ACTION_SPACE.shape[0])
-    if algorithm != "ppo" and kwargs.bounded_mean is not None:
-        raise ConfigError(source, f"{field}.bounded_mean", "bounds a PPO policy's Gaussian mean; allowed: ppo")
+    if refusal := kwargs.refused_by(algorithm):
+        raise ConfigError(source, f"{field}.{refusal[0]}", refusal[1])
     if algorithm == "ppo":
-        if kwargs.n_critics is not None:
-            raise ConfigError(source, f"{field}.n_critics", "a PPO policy has no critics to count; allowed: sac, td3")
         if net_arch is None:
             pi = vf = DEFAULT_NET_ARCH["ppo"]
         elif isinstance(net_arch, dict):

@@ -35,7 +35,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from common.actions import MAPPINGS
 from common.conditions import CONDITION_KEYS, ONLY_2D, ONLY_3D, conditions_of
-from common.curriculum.hyperparams import resolve_hyperparams
+from common.curriculum.hyperparams import policy_kwargs_from_yaml, resolve_hyperparams
 from common.curriculum.policy import algorithm_class
 from common.curriculum.policy_file import ALGORITHMS
 from common.drive import refuse_other_drives
@@ -193,9 +193,11 @@ def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
             raise ConfigError(source, f"{field}.hyperparams.{key}",
                               f"not a {stage.algorithm.upper()} argument; allowed: {', '.join(sorted(allowed))}")
     resolve_hyperparams(stage.hyperparams, source=source, field=f"{field}.hyperparams")
-    if stage.algorithm != "ppo" and "bounded_mean" in stage.hyperparams.get("policy_kwargs", {}):
-        raise ConfigError(source, f"{field}.hyperparams.policy_kwargs.bounded_mean",
-                          f"bounds a PPO policy's Gaussian mean; allowed: algorithm ppo (this stage's: {stage.algorithm})")
+    if "policy_kwargs" in stage.hyperparams:
+        kwargs = policy_kwargs_from_yaml(stage.hyperparams["policy_kwargs"], source, f"{field}.hyperparams.policy_kwargs")
+        if refusal := kwargs.refused_by(stage.algorithm):
+            raise ConfigError(source, f"{field}.hyperparams.policy_kwargs.{refusal[0]}",
+                              f"{refusal[1]} (this stage's: {stage.algorithm})")
     _check_env_kwargs(stage, source, f"{field}.env_kwargs")
     if stage.init_from == "previous" and index == 0:
         raise ConfigError(source, f"{field}.init_from", "the first stage has no previous stage; allowed: null or a policy path")

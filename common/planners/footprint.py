@@ -25,6 +25,7 @@ from scipy import ndimage
 from common.geometry import box_distance
 from common.kernel_cache import kernel
 from common.occupancy import OccupancyGrid
+from common.planners.base import grid_arrays
 from common.scenario import RobotProfile
 
 SLACK = 1.08  # a covering disc's radius is at most this many times the rectangle's half-width
@@ -299,5 +300,4 @@ def kernel_arrays(grid: "OccupancyGrid | FootprintGrid") -> tuple:
     inflated grid (a point robot) its cells with an empty field, no discs and no boxes."""
     if isinstance(grid, FootprintGrid):
         return grid.arrays
-    return (np.empty((0, 0)), np.ascontiguousarray(grid.occupied, dtype=np.bool_), float(grid.origin[0]),
-            float(grid.origin[1]), float(grid.resolution), np.empty((0, 2)), np.empty(0), 0, np.empty((0, 4)), 0.0)
+    return (np.empty((0, 0)), *grid_arrays(grid), np.empty((0, 2)), np.empty(0), 0, np.empty((0, 4)), 0.0)
