@@ -13,7 +13,7 @@ import math
 import numpy as np
 from numba.extending import register_jitable
 
-from common.kernel_cache import kernel
+from common.kernel_cache import kernel, uncounted
 from common.polygons import orientation
 
 
@@ -109,20 +109,24 @@ def polygon_sdf(points: np.ndarray, vertices: np.ndarray) -> np.ndarray:
     return np.where(inside, -dist, dist)
 
 
+@uncounted
+def point_in_polygon(px: float, py: float, vertices: np.ndarray) -> bool:
+    """Whether (px, py) lies inside the closed ring (K, 2), by the even-odd crossing rule."""
+    crossings = False
+    for j in range(len(vertices)):
+        x1, y1 = vertices[j - 1, 0], vertices[j - 1, 1]
+        x2, y2 = vertices[j, 0], vertices[j, 1]
+        if (y1 > py) != (y2 > py) and px < x1 + (py - y1) * (x2 - x1) / (y2 - y1):
+            crossings = not crossings
+    return crossings
+
+
 @kernel
 def points_in_polygon(points: np.ndarray, vertices: np.ndarray) -> np.ndarray:
-    """Whether each point (N, 2) lies inside the closed ring (K, 2), by the even-odd crossing rule."""
+    """Whether each point (N, 2) lies inside the closed ring (K, 2) (:func:`point_in_polygon`)."""
     inside = np.zeros(len(points), dtype=np.bool_)
-    k = len(vertices)
     for i in range(len(points)):
-        px, py = points[i, 0], points[i, 1]
-        crossings = False
-        for j in range(k):
-            x1, y1 = vertices[j - 1, 0], vertices[j - 1, 1]
-            x2, y2 = vertices[j, 0], vertices[j, 1]
-            if (y1 > py) != (y2 > py) and px < x1 + (py - y1) * (x2 - x1) / (y2 - y1):
-                crossings = not crossings
-        inside[i] = crossings
+        inside[i] = point_in_polygon(points[i, 0], points[i, 1], vertices)
     return inside
 
 

@@ -34,6 +34,8 @@ import sys
 import numpy as np
 from numba.extending import register_jitable
 
+from common.kernel_cache import uncounted
+
 QUADRANT_SEGMENTS = 16  # shapely's default buffer(quad_segs=...), not GEOS's own 8
 CIRCLE_VERTICES = 4 * QUADRANT_SEGMENTS  # a circle ring has these plus its closing point
 SNAP = 5e-16  # Angle::sinCosSnap's threshold
@@ -93,50 +95,62 @@ def rectangle_outline(length: float, width: float, wheelbase: float = 0.0) -> np
     return ring
 
 
+@uncounted
+def placed(outline: np.ndarray, i: int, x: float, y: float, cos_t: float, sin_t: float) -> tuple[float, float]:
+    """Vertex ``i`` of ``outline`` as IR-SIM's ``geometry_transform`` places it at (x, y) turned by
+    the angle of cosine ``cos_t`` and sine ``sin_t`` (np.cos / np.sin of a float64 scalar are libm's,
+    as math's are)."""
+    px, py = outline[i, 0], outline[i, 1]
+    return px * cos_t - py * sin_t + x, px * sin_t + py * cos_t + y
+
+
 @register_jitable
 def transformed(outline: np.ndarray, x: float, y: float, theta: float) -> np.ndarray:
     """IR-SIM's ``geometry_transform(geometry, [x, y, theta])`` applied to a ring's coordinates."""
-    # np.cos / np.sin of a float64 scalar are libm's cos / sin, as math's are.
-    cos_t, sin_t = math.cos(theta), math.sin(theta)
+    c, s = math.cos(theta), math.sin(theta)
     out = np.empty_like(outline)
     for i in range(outline.shape[0]):
-        px, py = outline[i, 0], outline[i, 1]
-        out[i, 0] = px * cos_t - py * sin_t + x
-        out[i, 1] = px * sin_t + py * cos_t + y
+        out[i, 0], out[i, 1] = placed(outline, i, x, y, c, s)
     return out
 
 
-@register_jitable
-def centroid(ring: np.ndarray) -> tuple[float, float]:
-    """GEOS's centroid of the polygon whose shell is the closed ``ring`` (n + 1, 2), no holes.
+@uncounted
+def centroid(outline: np.ndarray, x: float = 0.0, y: float = 0.0, theta: float = 0.0) -> tuple[float, float]:
+    """GEOS's centroid of the polygon whose shell is the closed ring ``outline`` (n + 1, 2), no holes,
+    placed at (x, y, theta) as IR-SIM places its geometry. The vertices are placed as they are read,
+    to the same bits as a placed copy of the ring, so a mover's step allocates nothing.
 
     ``Centroid::addShell`` multiplies each triangle by +1 or -1 after the ring's orientation; negation
     is exact and rounding symmetric, so both signs end in the same quotient and none is needed here.
     """
-    base_x, base_y = ring[0, 0], ring[0, 1]
+    c, s = math.cos(theta), math.sin(theta)
+    base_x, base_y = placed(outline, 0, x, y, c, s)
     cg3_x = cg3_y = area_sum2 = 0.0
-    for i in range(ring.shape[0] - 1):
-        x1, y1, x2, y2 = ring[i, 0], ring[i, 1], ring[i + 1, 0], ring[i + 1, 1]
+    x1, y1 = base_x, base_y
+    for i in range(outline.shape[0] - 1):
+        x2, y2 = placed(outline, i + 1, x, y, c, s)
         area2 = (x1 - base_x) * (y2 - base_y) - (x2 - base_x) * (y1 - base_y)
         cg3_x += area2 * (base_x + x1 + x2)
         cg3_y += area2 * (base_y + y1 + y2)
         area_sum2 += area2
+        x1, y1 = x2, y2
     if abs(area_sum2) > 0.0:
         return cg3_x / 3 / area_sum2, cg3_y / 3 / area_sum2
     # A ring without area: GEOS's length-weighted centroid of its segments, else its first point.
     length = sum_x = sum_y = 0.0
-    for i in range(ring.shape[0] - 1):
-        x1, y1, x2, y2 = ring[i, 0], ring[i, 1], ring[i + 1, 0], ring[i + 1, 1]
+    x1, y1 = base_x, base_y
+    for i in range(outline.shape[0] - 1):
+        x2, y2 = placed(outline, i + 1, x, y, c, s)
         dx, dy = x1 - x2, y1 - y2
         segment = math.sqrt(dx * dx + dy * dy)
-        if segment == 0.0:
-            continue
-        length += segment
-        sum_x += segment * ((x1 + x2) / 2)
-        sum_y += segment * ((y1 + y2) / 2)
+        if segment != 0.0:
+            length += segment
+            sum_x += segment * ((x1 + x2) / 2)
+            sum_y += segment * ((y1 + y2) / 2)
+        x1, y1 = x2, y2
     if length > 0.0:
         return sum_x / length, sum_y / length
-    return ring[0, 0], ring[0, 1]
+    return base_x, base_y
 
 
 @register_jitable
@@ -248,7 +262,7 @@ def circle_disc(cx_offset: float, cy_offset: float, radius: float, x: float, y: 
     minimum bounding radius). The radius is of the untransformed circle, as IR-SIM caches it, so a
     caller may keep it per object; it is most of this function's cost (about 6 us compiled)."""
     outline = circle_outline(radius, cx_offset, cy_offset)
-    cx, cy = centroid(transformed(outline, x, y, theta))
+    cx, cy = centroid(outline, x, y, theta)
     return cx, cy, bounding_radius(outline)
 
 
@@ -258,5 +272,5 @@ def rectangle_disc(length: float, width: float, x: float, y: float, theta: float
     """An IR-SIM rectangle at state (x, y, theta): (centroid x, centroid y, minimum bounding radius
     of the untransformed rectangle)."""
     outline = rectangle_outline(length, width, wheelbase)
-    cx, cy = centroid(transformed(outline, x, y, theta))
+    cx, cy = centroid(outline, x, y, theta)
     return cx, cy, bounding_radius(outline)

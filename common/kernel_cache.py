@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Callable
 
 from numba import njit
+from numba.extending import register_jitable
 from numba.core.dispatcher import Dispatcher
 from numba.core.caching import CompileResultCacheImpl, FunctionCache, InTreeCacheLocator, UserWideCacheLocator
 
@@ -91,6 +92,12 @@ def cached_kernels(root: Path, modules: tuple[str, ...]) -> Callable:
 
 
 kernel = cached_kernels(ROOT, KERNEL_MODULES)
+
+# A function compiled into the kernels that call it, without numba's reference counting: numba
+# counts references to every array a compiled function is handed (two atomic operations per array
+# per call), which took a third of a crowd's step in calls to small helpers. Such a function must
+# not allocate, nor call one that does: numba refuses to compile it then.
+uncounted = register_jitable(_nrt=False)
 
 
 def compiled_for(dispatcher: Dispatcher, *args) -> Callable:

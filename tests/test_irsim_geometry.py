@@ -105,13 +105,17 @@ def test_rectangle_outline_is_irsims_polygon():
 
 def test_centroid_is_geos_centroid_of_transformed_circles_and_rectangles():
     for (radius, cx, cy), (x, y, theta) in zip(circles(3000, seed=3), states(3000, seed=4)):
-        for ring in (g.circle_outline(radius, cx, cy), g.transformed(g.circle_outline(radius, cx, cy), x, y, theta)):
+        outline = g.circle_outline(radius, cx, cy)
+        for ring in (outline, g.transformed(outline, x, y, theta)):
             c = shapely.Polygon(ring).centroid
             assert g.centroid(ring) == (c.x, c.y), (radius, cx, cy, x, y, theta)
+        # Placed as it is read: the same bits as the placed ring's.
+        assert g.centroid(outline, x, y, theta) == (c.x, c.y), (radius, cx, cy, x, y, theta)
     for (length, width, wheelbase), (x, y, theta) in zip(rectangles(3000, seed=5), states(3000, seed=6)):
-        ring = g.transformed(our_rectangle(length, width, wheelbase), x, y, theta)
-        c = shapely.Polygon(ring).centroid
-        assert g.centroid(ring) == (c.x, c.y), (length, width, wheelbase, x, y, theta)
+        outline = our_rectangle(length, width, wheelbase)
+        c = shapely.Polygon(g.transformed(outline, x, y, theta)).centroid
+        assert g.centroid(g.transformed(outline, x, y, theta)) == g.centroid(outline, x, y, theta) == (c.x, c.y), \
+            (length, width, wheelbase, x, y, theta)
     # The ulps are real: the origin circle's centroid is not the origin, and ours is GEOS's.
     c = shapely.Point(0, 0).buffer(1.0).centroid
     assert (c.x, c.y) != (0.0, 0.0) and g.centroid(g.circle_outline(1.0)) == (c.x, c.y)
@@ -121,7 +125,8 @@ def test_centroid_of_a_ring_without_area_is_geos_line_or_point_centroid():
     for (length, width), (x, y, theta) in zip([(1.0, 0.0), (0.0, 2.5), (0.0, 0.0), (3.7, 0.0)] * 25, states(100, seed=7)):
         ring = g.transformed(g.rectangle_outline(length, width), x, y, theta)
         c = shapely.Polygon(ring).centroid
-        assert g.centroid(ring) == (c.x, c.y), (length, width, x, y, theta)
+        assert g.centroid(ring) == g.centroid(g.rectangle_outline(length, width), x, y, theta) == (c.x, c.y), \
+            (length, width, x, y, theta)
 
 
 def test_bounding_radius_is_geos_minimum_bounding_radius():
@@ -227,6 +232,7 @@ def test_compiled_functions_give_the_python_bits():
         "rectangle_outline_wheelbase": numba.njit(lambda length, width, wb: g.rectangle_outline(length, width, wb)),
         "transformed": numba.njit(lambda ring, x, y, theta: g.transformed(ring, x, y, theta)),
         "centroid": numba.njit(lambda ring: g.centroid(ring)),
+        "centroid_placed": numba.njit(lambda ring, x, y, theta: g.centroid(ring, x, y, theta)),
         "bounding_radius": numba.njit(lambda ring: g.bounding_radius(ring)),
         "circle_disc": numba.njit(lambda cx, cy, r, x, y, theta: g.circle_disc(cx, cy, r, x, y, theta)),
         "rectangle_disc": numba.njit(lambda length, width, x, y, theta, wb: g.rectangle_disc(length, width, x, y, theta, wb)),
@@ -242,6 +248,7 @@ def test_compiled_functions_give_the_python_bits():
         assert_same_ring(kernels["transformed"](circle, x, y, theta), moved, "transformed")
         for ring in (circle, moved, rectangle, g.transformed(rectangle, x, y, theta)):
             assert kernels["centroid"](ring) == g.centroid(ring)
+            assert kernels["centroid_placed"](ring, x, y, theta) == g.centroid(ring, x, y, theta)
             assert kernels["bounding_radius"](ring) == g.bounding_radius(ring)
         assert kernels["circle_disc"](cx, cy, radius, x, y, theta) == g.circle_disc(cx, cy, radius, x, y, theta)
         assert kernels["rectangle_disc"](length, width, x, y, theta, wb) == g.rectangle_disc(length, width, x, y, theta, wb)

@@ -89,9 +89,11 @@ def test_what_stable_baselines3_needs_for_our_runs_is_declared():
 def test_every_module_with_cached_kernels_is_watched_for_source_changes():
     from common.kernel_cache import KERNEL_MODULES
 
-    # A register_jitable function is compiled into its callers' cached kernels: its module is watched too.
+    # A register_jitable (or uncounted) function is compiled into its callers' cached kernels: its
+    # module is watched too.
     cached = {str(path.relative_to(ROOT)) for package in PACKAGES for path in (ROOT / package).rglob("*.py")
-              if re.search(r"@kernel\b|@register_jitable", path.read_text()) and path.name != "kernel_cache.py"}
+              if re.search(r"@kernel\b|@register_jitable|@uncounted\b", path.read_text())
+              and path.name != "kernel_cache.py"}
     assert cached == set(KERNEL_MODULES)
 
 

@@ -16,7 +16,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba.extending import register_jitable
+
+from common.kernel_cache import uncounted
 
 from common.motion.steering import c_pow
 
@@ -28,14 +29,14 @@ PARAMETERS = ("vmax", "step_time", "neighbor_threshold", "relaxation_time", "for
               "n_angular", "n_velocity", "safety_radius")
 
 
-@register_jitable
+@uncounted
 def _square(value: float, exact: bool) -> float:
     """``value ** 2`` as IR-SIM's per-agent model has it (the C library's pow, which differs from
     value * value in the last bit at times) if ``exact``, else as its batched model has it (value * value)."""
     return c_pow(value, 2.0) if exact else value * value
 
 
-@register_jitable
+@uncounted
 def _within(dx: float, dy: float, reach: float) -> bool:
     """Whether a neighbour (dx, dy) away is within ``reach`` by IR-SIM's per-agent test with pow
     (decided by plain products, a hundred times cheaper, unless it is within rounding of the edge)."""
@@ -45,7 +46,7 @@ def _within(dx: float, dy: float, reach: float) -> bool:
     return c_pow(dx, 2.0) + c_pow(dy, 2.0) < c_pow(reach, 2.0)
 
 
-@register_jitable
+@uncounted
 def pair_force(x: float, y: float, vx: float, vy: float, ox: float, oy: float, ovx: float, ovy: float,
                p: np.ndarray, exact: bool) -> tuple[float, float, bool]:
     """The social force on an agent at (x, y) moving at (vx, vy) from one at (ox, oy) moving at
@@ -83,7 +84,7 @@ def pair_force(x: float, y: float, vx: float, vy: float, ox: float, oy: float, o
 SOCIAL = np.array([NEIGHBOR_THRESHOLD, LAMBDA_IMPORTANCE, GAMMA, N_ANGULAR, N_VELOCITY, SAFETY_RADIUS])  # pair_force's
 
 
-@register_jitable
+@uncounted
 def _social_force(x: float, y: float, vx: float, vy: float, neighbors: np.ndarray, count: int,
                   p: np.ndarray, exact: bool) -> tuple[float, float]:
     fx = fy = 0.0
@@ -96,7 +97,7 @@ def _social_force(x: float, y: float, vx: float, vy: float, neighbors: np.ndarra
     return fx, fy
 
 
-@register_jitable
+@uncounted
 def _obstacle_force(x: float, y: float, radius: float, segments: np.ndarray, p: np.ndarray) -> tuple[float, float]:
     fx = fy = 0.0
     sigma = p[SIGMA_OBSTACLE]
@@ -123,7 +124,7 @@ def _obstacle_force(x: float, y: float, radius: float, segments: np.ndarray, p: 
     return fx, fy
 
 
-@register_jitable
+@uncounted
 def desire(desired_x: float, desired_y: float, vmax: float, group: bool) -> tuple[float, float]:
     """The desired velocity at ``vmax`` along the desire (IR-SIM renormalises the goal-seeking
     velocity it is given): a group's norm is NumPy's hypot, an agent's own ``(...) ** 0.5``."""
@@ -136,7 +137,7 @@ def desire(desired_x: float, desired_y: float, vmax: float, group: bool) -> tupl
     return desired_x, desired_y
 
 
-@register_jitable
+@uncounted
 def social_force_velocity(x: float, y: float, vx: float, vy: float, radius: float, desired_x: float,
                           desired_y: float, neighbors: np.ndarray, count: int, segments: np.ndarray,
                           p: np.ndarray, group: bool = False) -> tuple[float, float]:
@@ -149,7 +150,7 @@ def social_force_velocity(x: float, y: float, vx: float, vy: float, radius: floa
     return velocity_under(x, y, vx, vy, radius, desired_x, desired_y, social, segments, p)
 
 
-@register_jitable
+@uncounted
 def velocity_under(x: float, y: float, vx: float, vy: float, radius: float, desired_x: float, desired_y: float,
                    social: tuple[float, float], segments: np.ndarray, p: np.ndarray) -> tuple[float, float]:
     """The next velocity under the social force ``social`` (summed from :func:`pair_force`), the

@@ -8,8 +8,8 @@ command feeds its next state: a last-bit difference in a heading or a speed grow
 trajectory, and in RVO it can pick another grid candidate outright, so a world would no longer
 replay as it does in IR-SIM.
 
-Every function is ``register_jitable`` (the two helpers below: an ``overload``): Python calls it as
-a plain function, and compiled kernels inline it. Both must give the same bits, which needs care
+Every function is ``uncounted`` (:mod:`common.kernel_cache`; the two helpers below: an ``overload``):
+Python calls it as a plain function, and compiled kernels inline it. Both must give the same bits, which needs care
 in two places where numba and CPython differ:
 
 * squares: IR-SIM writes ``v ** 2`` on scalars, which CPython and numpy compute with the C
@@ -30,7 +30,9 @@ import sys
 
 from llvmlite import ir
 from numba.core import cgutils, types
-from numba.extending import intrinsic, overload, register_jitable
+from numba.extending import intrinsic, overload
+
+from common.kernel_cache import uncounted
 
 __all__ = [
     "c_pow", "desired_omni_velocity", "diff_dash", "omni_dash", "omni_to_world", "python_hypot", "world_to_diff",
@@ -77,7 +79,7 @@ def python_hypot(x: float, y: float) -> float:
     return math.hypot(x, y)
 
 
-@register_jitable
+@uncounted
 def _split(value: float) -> tuple[float, float]:
     """Veltkamp's split: ``value = high + low``, halves of at most 26 bits whose products are exact."""
     scaled = value * _VELTKAMP
@@ -85,7 +87,7 @@ def _split(value: float) -> tuple[float, float]:
     return high, value - high
 
 
-@register_jitable
+@uncounted
 def _exact_product(a: float, b: float) -> tuple[float, float]:
     """Dekker's product: ``a * b = high + low`` exactly (later CPython's ``dl_mul``, there with fma: the same bits)."""
     a_high, a_low = _split(a)
@@ -96,7 +98,7 @@ def _exact_product(a: float, b: float) -> tuple[float, float]:
     return high, product - high + cross + a_low * b_low
 
 
-@register_jitable
+@uncounted
 def _norm_311(a: float, b: float, largest: float) -> float:
     """CPython 3.10/3.11's ``vector_norm`` for two finite coordinates ``0 <= a, b <= largest``, ``largest > 0``."""
     exponent = math.frexp(largest)[1]
@@ -142,7 +144,7 @@ def _norm_311(a: float, b: float, largest: float) -> float:
     return largest * math.sqrt(total - 1.0 + frac1)
 
 
-@register_jitable
+@uncounted
 def _scaled_norm_312(a: float, b: float, largest: float) -> float:
     """Later CPython's ``vector_norm`` for two finite coordinates, ``largest`` > 0 and normal."""
     exponent = math.frexp(largest)[1]
@@ -167,7 +169,7 @@ def _scaled_norm_312(a: float, b: float, largest: float) -> float:
     return root / scale
 
 
-@register_jitable
+@uncounted
 def _norm_312(a: float, b: float, largest: float) -> float:
     """Later CPython's ``vector_norm`` (3.12 on, as far as we know), with its rescaling of subnormal coordinates."""
     if math.frexp(largest)[1] < -1023:
@@ -201,7 +203,7 @@ def _python_hypot_compiled(x, y):
     return implementation
 
 
-@register_jitable
+@uncounted
 def _sign(value: float) -> float:
     """``np.sign`` of a float: 1, -1, 0 (also for -0.0) or NaN."""
     if value > 0.0:
@@ -216,7 +218,7 @@ def _sign(value: float) -> float:
 # --- IR-SIM's functions --------------------------------------------------------------------------------
 
 
-@register_jitable
+@uncounted
 def wrap_to_pi(angle: float) -> float:
     """IR-SIM's ``WrapToPi``: ``(a + pi) % (2 pi) - pi``; 0.0 for a non-finite angle.
 
@@ -229,7 +231,7 @@ def wrap_to_pi(angle: float) -> float:
     return (shifted if 0.0 <= shifted < 2.0 * math.pi else shifted % (2.0 * math.pi)) - math.pi
 
 
-@register_jitable
+@uncounted
 def _relative_position(x: float, y: float, gx: float, gy: float) -> tuple[float, float]:
     """IR-SIM's ``relative_position``: CPython's hypot distance and the wrapped bearing to the goal."""
     distance = python_hypot(gx - x, gy - y)
@@ -237,7 +239,7 @@ def _relative_position(x: float, y: float, gx: float, gy: float) -> tuple[float,
     return distance, wrap_to_pi(math.atan2(gy - y, gx - x))
 
 
-@register_jitable
+@uncounted
 def world_to_diff(
     heading: float, vx: float, vy: float, w_max: float, guarantee_time: float, tolerance: float, mini_speed: float
 ) -> tuple[float, float]:
@@ -260,7 +262,7 @@ def world_to_diff(
     return v, w
 
 
-@register_jitable
+@uncounted
 def world_to_omni(heading: float, vx: float, vy: float) -> tuple[float, float]:
     """IR-SIM's ``vel_world2omni``: a world-frame velocity to (forward, lateral) in the body frame."""
     cos_t = math.cos(heading)
@@ -268,7 +270,7 @@ def world_to_omni(heading: float, vx: float, vy: float) -> tuple[float, float]:
     return vx * cos_t + vy * sin_t, -vx * sin_t + vy * cos_t
 
 
-@register_jitable
+@uncounted
 def omni_to_world(heading: float, forward: float, lateral: float) -> tuple[float, float]:
     """IR-SIM's ``vel_omni2world``: a body-frame (forward, lateral) velocity to the world frame."""
     cos_t = math.cos(heading)
@@ -276,7 +278,7 @@ def omni_to_world(heading: float, forward: float, lateral: float) -> tuple[float
     return forward * cos_t - lateral * sin_t, forward * sin_t + lateral * cos_t
 
 
-@register_jitable
+@uncounted
 def diff_dash(
     x: float, y: float, theta: float, gx: float, gy: float, v_max: float, w_max: float, goal_threshold: float,
     angle_tolerance: float, angular_acce: float, dt: float,
@@ -309,7 +311,7 @@ def diff_dash(
     return linear, angular
 
 
-@register_jitable
+@uncounted
 def omni_dash(
     x: float, y: float, theta: float, gx: float, gy: float, v_forward_max: float, v_lateral_max: float,
     goal_threshold: float,
@@ -322,7 +324,7 @@ def omni_dash(
     return 0.0, 0.0
 
 
-@register_jitable
+@uncounted
 def desired_omni_velocity(
     x: float, y: float, gx: float, gy: float, speed_x: float, speed_y: float, threshold: float
 ) -> tuple[float, float]:

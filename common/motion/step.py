@@ -19,9 +19,9 @@ import math
 import numpy as np
 from numba.extending import register_jitable
 
-from common.geometry import box_distance, points_in_polygon, segment_box_gap, segment_distance
-from common.irsim_geometry import centroid, transformed
-from common.kernel_cache import kernel
+from common.geometry import box_distance, point_in_polygon, segment_box_gap, segment_distance
+from common.irsim_geometry import centroid
+from common.kernel_cache import kernel, uncounted
 from common.kinematics import unicycle_euler
 from common.motion.orca import orca_velocities
 from common.motion.sfm import SOCIAL, VMAX, desire, pair_force, social_force_velocity, velocity_under
@@ -40,7 +40,7 @@ COLLISION_MODES = ("stop", "unobstructed", "unobstructed_obstacles")
 LANE_MARGIN = 0.1  # m: a yielding mover's lane reaches this far beyond its sides and the robot's
 
 
-@register_jitable
+@uncounted
 def velocity_range(F: np.ndarray, m: int, dt: float) -> tuple[float, float, float, float]:
     """The command window (low 0, low 1, high 0, high 1): the limits, narrowed to what the
     acceleration reaches from the last command (IR-SIM's ``get_vel_range``)."""
@@ -51,7 +51,7 @@ def velocity_range(F: np.ndarray, m: int, dt: float) -> tuple[float, float, floa
     return max(lo0, F[m, V0] - w0), max(lo1, F[m, V1] - w1), min(hi0, F[m, V0] + w0), min(hi1, F[m, V1] + w1)
 
 
-@register_jitable
+@uncounted
 def world_velocity(kinematics: int, theta: float, c0: float, c1: float) -> tuple[float, float]:
     """A command's world-frame velocity (IR-SIM's ``velocity_xy``)."""
     if kinematics == DIFF:
@@ -59,7 +59,7 @@ def world_velocity(kinematics: int, theta: float, c0: float, c1: float) -> tuple
     return omni_to_world(theta, c0, c1)
 
 
-@register_jitable
+@uncounted
 def desired_velocity(F: np.ndarray, I: np.ndarray, goals: np.ndarray, m: int) -> tuple[float, float]:  # noqa: E741
     """Full speed toward the current goal, zero within 0.1 m of it (IR-SIM's ``desired_omni_vel``)."""
     speed_y = F[m, VMAX0] if I[m, KINEMATICS] == DIFF else F[m, VMAX1]
@@ -67,7 +67,7 @@ def desired_velocity(F: np.ndarray, I: np.ndarray, goals: np.ndarray, m: int) ->
                                  speed_y, 0.1)
 
 
-@register_jitable
+@uncounted
 def sees(I: np.ndarray, objects: np.ndarray, m: int, row: int) -> bool:  # noqa: E741
     """Whether mover ``m``'s behaviour takes object ``row`` into account (not itself, not a line,
     the robot only if it reacts to it, and only the roles it targets)."""
@@ -83,7 +83,7 @@ def sees(I: np.ndarray, objects: np.ndarray, m: int, row: int) -> bool:  # noqa:
     return True
 
 
-@register_jitable
+@uncounted
 def gather(I: np.ndarray, objects: np.ndarray, m: int, out: np.ndarray) -> int:  # noqa: E741
     """Write the objects mover ``m`` reacts to into ``out`` as rows x, y, vx, vy, radius; their count."""
     count = 0
@@ -93,7 +93,7 @@ def gather(I: np.ndarray, objects: np.ndarray, m: int, out: np.ndarray) -> int: 
     return count
 
 
-@register_jitable
+@uncounted
 def to_command(F: np.ndarray, I: np.ndarray, m: int, vx: float, vy: float, w_max: float, dt: float,  # noqa: E741
                tolerance: float) -> tuple[float, float]:
     """A planned world-frame velocity as the mover's command."""
@@ -102,7 +102,7 @@ def to_command(F: np.ndarray, I: np.ndarray, m: int, vx: float, vy: float, w_max
     return world_to_omni(F[m, THETA], vx, vy)
 
 
-@register_jitable
+@uncounted
 def _sfm(F, I, params, goals, objects, segments, m, neighbors, count, dt):  # noqa: E741
     """The social-force command of mover ``m`` among the first ``count`` rows of ``neighbors``."""
     row = I[m, ROW]
@@ -175,15 +175,16 @@ def _plan_orca(F, I, params, goals, objects, orca_velocity, members, inside, dt)
         F[m, PLAN0], F[m, PLAN1] = to_command(F, I, m, np.float64(out[j, 0]), np.float64(out[j, 1]), F[m, VMAX1], dt, 0.1)
 
 
-@register_jitable
+@uncounted
 def _plan_sfm(F, I, params, goals, objects, segments, members, inside, dt, neighbors):  # noqa: E741
     """The social force among a group from one snapshot, as IR-SIM's batched model: each member
     among the others (in order), then the objects outside the group it sees. A pair of members
     with the same parameters pushes each other equally and oppositely (:func:`pair_force`), so
-    each such pair is computed once: the crowd's step costs half."""
+    each such pair is computed once: the crowd's step costs half. Row a of ``neighbors`` (scratch
+    here) sums member a's pushes in member order, as the batched model sums them."""
     k = members.shape[0]
-    pushes = np.zeros((k, k, 2))
-    counted = np.zeros((k, k), dtype=np.bool_)
+    for a in range(k):
+        neighbors[a, 0] = neighbors[a, 1] = 0.0
     alike = True  # whether every member pushes with the same parameters (a crowd's usual case)
     for a in range(1, k):
         alike = alike and _same_social(params[members[0]], params[members[a]])
@@ -194,22 +195,22 @@ def _plan_sfm(F, I, params, goals, objects, segments, members, inside, dt, neigh
             fx, fy, counts = pair_force(objects[ri, OX], objects[ri, OY], objects[ri, OVX], objects[ri, OVY],
                                         objects[rj, OX], objects[rj, OY], objects[rj, OVX], objects[rj, OVY],
                                         params[i], False)
-            pushes[a, c, 0], pushes[a, c, 1], counted[a, c] = fx, fy, counts
-            if alike or _same_social(params[i], params[j]):
-                pushes[c, a, 0], pushes[c, a, 1], counted[c, a] = -fx, -fy, counts
-            else:
-                pushes[c, a, 0], pushes[c, a, 1], counted[c, a] = pair_force(
-                    objects[rj, OX], objects[rj, OY], objects[rj, OVX], objects[rj, OVY], objects[ri, OX],
-                    objects[ri, OY], objects[ri, OVX], objects[ri, OVY], params[j], False)
+            if counts:
+                neighbors[a, 0] += fx
+                neighbors[a, 1] += fy
+            if not (alike or _same_social(params[i], params[j])):
+                fx, fy, counts = pair_force(objects[rj, OX], objects[rj, OY], objects[rj, OVX], objects[rj, OVY],
+                                            objects[ri, OX], objects[ri, OY], objects[ri, OVX], objects[ri, OVY],
+                                            params[j], False)
+                fx, fy = -fx, -fy
+            if counts:
+                neighbors[c, 0] -= fx
+                neighbors[c, 1] -= fy
     for a in range(k):
         m = members[a]
         row = I[m, ROW]
         x, y, vx, vy = objects[row, OX], objects[row, OY], objects[row, OVX], objects[row, OVY]
-        fx = fy = 0.0
-        for c in range(k):
-            if counted[a, c]:
-                fx += pushes[a, c, 0]
-                fy += pushes[a, c, 1]
+        fx, fy = neighbors[a, 0], neighbors[a, 1]
         for other in range(objects.shape[0]):
             if not inside[other] and sees(I, objects, m, other):
                 gx, gy, counts = pair_force(x, y, vx, vy, objects[other, OX], objects[other, OY], objects[other, OVX],
@@ -223,7 +224,7 @@ def _plan_sfm(F, I, params, goals, objects, segments, members, inside, dt, neigh
         F[m, PLAN0], F[m, PLAN1] = to_command(F, I, m, wx, wy, velocity_range(F, m, dt)[3], dt, 0.02)
 
 
-@register_jitable
+@uncounted
 def _group_desire(F, I, goals, params, m):  # noqa: E741
     """A group member's desired velocity: ``vmax`` toward its goal, none within 0.1 m of it. IR-SIM
     takes the cosine and sine of the bearing at the mover's speeds and rescales them to ``vmax``;
@@ -239,7 +240,7 @@ def _group_desire(F, I, goals, params, m):  # noqa: E741
     return params[m, VMAX] * dx / distance, params[m, VMAX] * dy / distance
 
 
-@register_jitable
+@uncounted
 def _same_social(p: np.ndarray, q: np.ndarray) -> bool:
     for index in SOCIAL:
         if p[index] != q[index]:
@@ -247,7 +248,7 @@ def _same_social(p: np.ndarray, q: np.ndarray) -> bool:
     return True
 
 
-@register_jitable
+@uncounted
 def _add_neighbor(objects, row, neighbors, count) -> int:
     neighbors[count, 0], neighbors[count, 1] = objects[row, OX], objects[row, OY]
     neighbors[count, 2], neighbors[count, 3] = objects[row, OVX], objects[row, OVY]
@@ -255,7 +256,7 @@ def _add_neighbor(objects, row, neighbors, count) -> int:
     return count + 1
 
 
-@register_jitable
+@uncounted
 def prepare(F, I, goals, routes, objects, m) -> bool:  # noqa: E741
     """Start mover ``m``'s step: a stopped mover halts (False); an arrived one takes its next goal
     (a loop starts over; a wanderer's was drawn before the step, by :func:`draw_wanderers`)."""
@@ -267,9 +268,10 @@ def prepare(F, I, goals, routes, objects, m) -> bool:  # noqa: E741
     if I[m, LOOP] == 1 and I[m, ARRIVED] == 1:
         length = I[m, ROUTE_LENGTH]
         if length > 1:
-            goals[m, :length] = routes[m, :length]
+            for k in range(length):
+                goals[m, k, 0], goals[m, k, 1] = routes[m, k, 0], routes[m, k, 1]
         else:  # one goal: back and forth between it and the start
-            goals[m, 0] = routes[m, 0]
+            goals[m, 0, 0], goals[m, 0, 1] = routes[m, 0, 0], routes[m, 0, 1]
             goals[m, 1, 0], goals[m, 1, 1] = F[m, START_X], F[m, START_Y]
             length = 2
         I[m, HEAD], I[m, TAIL], I[m, ARRIVED] = 0, length, 0
@@ -289,7 +291,7 @@ def draw_wanderers(F: np.ndarray, I: np.ndarray, goals: np.ndarray, rng: np.rand
         I[m, HEAD], I[m, TAIL], I[m, ARRIVED] = 0, 1, 0
 
 
-@register_jitable
+@uncounted
 def command(F, I, params, goals, objects, segments, m, dt, neighbors) -> tuple[float, float]:  # noqa: E741
     """Mover ``m``'s command this step, unless it uses ``rvo`` (the caller's)."""
     if I[m, PLANNED] == 1:
@@ -308,7 +310,7 @@ def command(F, I, params, goals, objects, segments, m, dt, neighbors) -> tuple[f
     return min(max(c0, lo0), hi0), min(max(c1, lo1), hi1)
 
 
-@register_jitable
+@uncounted
 def robot_ahead(F: np.ndarray, I: np.ndarray, objects: np.ndarray, m: int, distance: float) -> bool:  # noqa: E741
     """Whether the robot's disc stands within ``distance`` ahead of mover ``m``'s front, in its lane
     (its width and the robot's, and ``LANE_MARGIN`` either side): a ``dash`` mover yields to it."""
@@ -322,17 +324,17 @@ def robot_ahead(F: np.ndarray, I: np.ndarray, objects: np.ndarray, m: int, dista
     return ahead > 0.0 and ahead - front - radius < distance and side < half + radius + LANE_MARGIN
 
 
-@register_jitable
+@uncounted
 def place_disc(objects, outlines, irsim, row, outline, x, y, theta) -> None:
     """Put an object's disc where its body is: its centre, or in an IR-SIM world the GEOS centroid of
     its polygon (the first ``outline`` rows of ``outlines``) placed at (x, y, theta)."""
     if irsim:
-        objects[row, OX], objects[row, OY] = centroid(transformed(outlines[:outline], x, y, theta))
+        objects[row, OX], objects[row, OY] = centroid(outlines[:outline], x, y, theta)
     else:
         objects[row, OX], objects[row, OY] = x, y
 
 
-@register_jitable
+@uncounted
 def move(F, I, objects, outlines, irsim, m, c0, c1, dt) -> None:  # noqa: E741
     """Apply a command to mover ``m`` for one step (clipped to its window; IR-SIM's kinematics)."""
     lo0, lo1, hi0, hi1 = velocity_range(F, m, dt)
@@ -349,7 +351,7 @@ def move(F, I, objects, outlines, irsim, m, c0, c1, dt) -> None:  # noqa: E741
     objects[row, OVX], objects[row, OVY] = world_velocity(I[m, KINEMATICS], theta, c0, c1)
 
 
-@register_jitable
+@uncounted
 def advance(F, I, params, goals, routes, objects, segments, outlines, irsim, dt, neighbors) -> None:  # noqa: E741
     """Every mover's step in order (none of them uses ``rvo``; the wanderers have drawn)."""
     for m in range(F.shape[0]):
@@ -358,7 +360,7 @@ def advance(F, I, params, goals, routes, objects, segments, outlines, irsim, dt,
             move(F, I, objects, outlines, irsim, m, c0, c1, dt)
 
 
-@register_jitable
+@uncounted
 def _touches_static(shape, x, y, theta, r, length, width, circles, boxes, segments, rings, ring_index) -> bool:
     """Whether a body (a circle of radius r, or a box of length and width at heading theta) touches
     the static geometry (see :func:`common.motion.table.static_contacts`)."""
@@ -383,17 +385,14 @@ def _touches_static(shape, x, y, theta, r, length, width, circles, boxes, segmen
                                                                                                        x2, y2) - r
         if gap <= 0.0:
             return True
-    if ring_index.shape[0] == 0:
-        return False
-    point = np.array([[x, y]])
     for k in range(ring_index.shape[0]):
         first, count = ring_index[k, 0], ring_index[k, 1]
-        if points_in_polygon(point, rings[first:first + count])[0]:
+        if point_in_polygon(x, y, rings[first:first + count]):
             return True
     return False
 
 
-@register_jitable
+@uncounted
 def _box_axes_separate(ax, ay, ac, as_, ahl, ahw, bx, by, bc, bs, bhl, bhw) -> bool:
     """Whether one of box a's two axes separates it from box b."""
     for ux, uy, half in ((ac, as_, ahl), (-as_, ac, ahw)):
@@ -404,7 +403,7 @@ def _box_axes_separate(ax, ay, ac, as_, ahl, ahw, bx, by, bc, bs, bhl, bhw) -> b
     return False
 
 
-@register_jitable
+@uncounted
 def bodies_touch(shape_a, xa, ya, ta, ra, la, wa, shape_b, xb, yb, tb, rb, lb, wb) -> bool:
     """Whether two bodies (a circle of radius r, or a box of length l and width w at heading t) touch."""
     if shape_a == BOX and shape_b == BOX:
@@ -418,7 +417,7 @@ def bodies_touch(shape_a, xa, ya, ta, ra, la, wa, shape_b, xb, yb, tb, rb, lb, w
     return math.hypot(xa - xb, ya - yb) <= ra + rb
 
 
-@register_jitable
+@uncounted
 def _touch(F, I, a, b) -> bool:  # noqa: E741
     # Bodies further apart along an axis than their bounding circles reach cannot touch: the check
     # spares a crowd's step most of its pairs' exact tests (the margin covers their rounding).
@@ -429,7 +428,7 @@ def _touch(F, I, a, b) -> bool:  # noqa: E741
                         I[b, SHAPE], F[b, X], F[b, Y], F[b, THETA], F[b, RADIUS], F[b, LENGTH], F[b, WIDTH])
 
 
-@register_jitable
+@uncounted
 def settle(F, I, goals, robot, mode, circles, boxes, segments, rings, ring_index) -> int:  # noqa: E741
     """Judge every mover after the step: arrival at its goal (the queue moves on, or it has
     arrived), contact with the static geometry, the robot (``robot``: shape, x, y, heading,
@@ -492,7 +491,7 @@ def snapshot(F, I, objects, moving, circles, boxes, states, circle_rows, box_row
         box_rows[k, 4], box_rows[k, 5] = 0.5 * F[m, LENGTH], 0.5 * F[m, WIDTH]
 
 
-@register_jitable
+@uncounted
 def sync_robot(F, I, objects, outline, irsim, robot, x, y, yaw, v, w, lateral, stopped) -> None:  # noqa: E741
     """Where the controlled robot is and the command it moves with (forward ``v``, turn rate
     ``w``, sideways ``lateral``): its disc (row 0 of ``objects``), its body for contacts
