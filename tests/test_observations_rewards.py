@@ -173,6 +173,21 @@ def test_the_env_pays_proximity_on_the_nearest_lidar_return():
     assert observation[5] == pytest.approx(nearest / 5.0)  # nav7's nearest return
 
 
+def test_a_vec_envs_deep_copy_of_the_info_shares_the_reward_shares():
+    import copy
+
+    from common.scenario import Scenario
+
+    # stable-baselines3's DummyVecEnv deep-copies every info every step: copying the shares term by
+    # term was a sixth of PPO's training. Each step makes new ones, so the copy may share them.
+    env = _flat_env(Scenario(start=(2.0, 2.0, 0.0), goal=(8.0, 8.0)), observation="nav7")
+    env.reset(seed=0)
+    first = env.step(STAND_STILL)[4]
+    second = env.step(STAND_STILL)[4]
+    assert copy.deepcopy(first)["reward_terms"] is first["reward_terms"] is not second["reward_terms"]
+    assert dict(first["reward_terms"]) == copy.deepcopy(first["reward_terms"]) and "time" in first["reward_terms"]
+
+
 def test_the_env_observes_through_odometry_not_the_true_pose():
     from common.scenario import RobotProfile as Profile, Scenario
 
