@@ -228,6 +228,10 @@ class Runner:
 
         if self.device == "cpu":
             torch.set_num_threads(1)  # measured: one thread is fastest for these small MLPs on 2 cores
+        # torch checks every distribution's parameters as it builds one, each step: PPO on the main
+        # job trained 7-10% faster without it. A diverged policy still stops the run: the envs
+        # refuse a NaN action.
+        torch.distributions.Distribution.set_default_validate_args(False)
         paths = self.stage_paths(index, stage)
         seed = self.config.seed + index
         venv = make_vec_env(_env_class(stage), n_envs=stage.n_envs, seed=seed, env_kwargs=_make_env_kwargs(stage),
