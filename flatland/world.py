@@ -30,7 +30,7 @@ from common.geometry import box_corner_table
 from common.grid_maps import occupied_boxes, occupancy
 from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, SegmentObstacle, WorldSpec
 from flatland.clearance import path_clear, swept_capsule
-from flatland.free_step import free_step, step_constants
+from flatland.free_step import free_step_code, step_constants
 from flatland.lidar import Lidar
 
 GRAVITY = 9.81
@@ -115,6 +115,7 @@ class World:
             mount_x=scenario.lidar.offset[0], mount_y=scenario.lidar.offset[1], first_beam=self.lidar.first_beam,
             beam_step=self.lidar.beam_step, range_max=scenario.lidar.range_max)
         self._moved = np.empty(8)
+        self._free_step_code = free_step_code() if self._compilable else None
         self._halts = scenario.world.collision_mode != "unobstructed"
         self._kept_movers: dict[int, tuple[Scenario, Movers]] = {}
         self._use_movers(scenario)
@@ -224,7 +225,7 @@ class World:
             self.space.add(*self._pieces)
         # Reshaped static shapes keep their old place in the space's index until reindexed.
         self.space.reindex_static()
-        self._solids = np.array(solids).reshape(-1, 4)
+        self._solids = np.array(solids, dtype=np.float64).reshape(-1, 4)
         return circle_table, box_table, np.vstack(segments)
 
     def _use(self, pool: list, rows: list, reshape: Callable[[Any, Any], None], make: Callable[[Any], Any]) -> None:
@@ -350,8 +351,9 @@ class World:
         changed, if it may touch."""
         lidar, odometry, moved = self.lidar, self.odometry, self._moved
         ranges = np.empty(lidar.spec.beams if scan else 0)
-        if not free_step(*self.pose, *odometry.pose, v, w, self._constants, lidar.circles, lidar.boxes,
-                         lidar.segments, self._solids, ranges, moved):
+        arguments = (*self.pose, *odometry.pose, v, w, self._constants, lidar.circles, lidar.boxes, lidar.segments,
+                     self._solids, ranges, moved)
+        if not self._free_step_code(*arguments):
             return None
         x, y, yaw, odometry_x, odometry_y, odometry_yaw, odometry.v, odometry.w = moved.tolist()
         self.pose = Pose2D(x, y, yaw)
