@@ -12,6 +12,7 @@ import gymnasium as gym
 import numpy as np
 
 from common.actions import ActionMapping
+from common.info import Info
 from common.kinematics import wrap_angle
 from common.observations import DEFAULT_GOAL_DISTANCE_SCALE, ObservationLayout, make_layout
 from common.readings import Readings, nearest_clearance, nearest_return
@@ -119,7 +120,7 @@ class NavigationEnv(gym.Env):
         self.trajectory = [tuple(self._readings.pose[:2])]
         if self.render_mode == "human":
             self.render()
-        info = {"distance": self.task.distance, "scenario": scenario.name, "goal_threshold": self.task.radius}
+        info = Info(distance=self.task.distance, scenario=scenario.name, goal_threshold=self.task.radius)
         return self.layout(self._readings, self._goal), info
 
     def step(self, action) -> tuple[np.ndarray, float, bool, bool, dict]:
@@ -143,7 +144,7 @@ class NavigationEnv(gym.Env):
         terminated = reached or outcome == "collision"
         truncated = outcome == "timeout"
         self.trajectory.append((readings.pose[0], readings.pose[1]))
-        info = {"reward_terms": shares, "distance": task.distance, "is_success": reached, "collided": readings.collided}
+        info = Info(reward_terms=shares, distance=task.distance, is_success=reached, collided=readings.collided)
         if self.render_mode == "human":
             self.render()
         return self.layout(readings, self._goal), float(reward), terminated, truncated, info

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any, Callable, Mapping, NamedTuple
 
 from common.errors import ConfigError, quote
+from common.info import Info
 from common.params import coerce, is_finite, keyword_parameters
 
 
@@ -181,24 +182,14 @@ class Reward:
         for term in self._stateful:
             term.reset()
 
-    def __call__(self, ctx: StepContext) -> tuple[float, Shares]:
+    def __call__(self, ctx: StepContext) -> tuple[float, Info]:
         """The total reward and each term's weighted share (summed in the terms' order)."""
-        shares = Shares()
+        shares = Info()
         total = 0.0
         for name, weight, fn in self._terms:  # one loop: a comprehension and sum() cost 40% more per step
             shares[name] = share = weight * fn(ctx)
             total += share
         return total, shares
-
-
-class Shares(dict):
-    """Each term's weighted share of one step's reward (``info["reward_terms"]``): a dict that a
-    deep copy shares instead of copying. stable-baselines3's DummyVecEnv deep-copies every env's
-    info at every step, and copying these term by term took a sixth of PPO's training time; the
-    env makes a new one each step and never changes it, so sharing it is safe."""
-
-    def __deepcopy__(self, memo: dict) -> Shares:
-        return self
 
 
 def resolve_reward_spec(spec: str | Mapping[str, Any], source: str | Path | None = None) -> dict[str, dict[str, Any]]:

@@ -173,19 +173,25 @@ def test_the_env_pays_proximity_on_the_nearest_lidar_return():
     assert observation[5] == pytest.approx(nearest / 5.0)  # nav7's nearest return
 
 
-def test_a_vec_envs_deep_copy_of_the_info_shares_the_reward_shares():
+def test_a_deep_copy_of_a_step_info_is_equal_and_independent():
     import copy
 
     from common.scenario import Scenario
 
-    # stable-baselines3's DummyVecEnv deep-copies every info every step: copying the shares term by
-    # term was a sixth of PPO's training. Each step makes new ones, so the copy may share them.
+    # stable-baselines3's DummyVecEnv deep-copies every info every step, after adding the episode's
+    # last observation to it: the info's own deep copy (the generic one cost a sixth of PPO's
+    # training) must still copy what can change.
     env = _flat_env(Scenario(start=(2.0, 2.0, 0.0), goal=(8.0, 8.0)), observation="nav7")
     env.reset(seed=0)
-    first = env.step(STAND_STILL)[4]
-    second = env.step(STAND_STILL)[4]
-    assert copy.deepcopy(first)["reward_terms"] is first["reward_terms"] is not second["reward_terms"]
-    assert dict(first["reward_terms"]) == copy.deepcopy(first["reward_terms"]) and "time" in first["reward_terms"]
+    info = env.step(STAND_STILL)[4]
+    info["terminal_observation"] = np.zeros(3)
+    copied = copy.deepcopy(info)
+    assert copied.keys() == info.keys() and copied["reward_terms"] == info["reward_terms"]
+    assert copied["distance"] == info["distance"] and np.array_equal(copied["terminal_observation"], np.zeros(3))
+    info["terminal_observation"][0] = 1.0
+    info["reward_terms"]["time"] = 99.0
+    assert copied["terminal_observation"][0] == 0.0 and copied["reward_terms"]["time"] != 99.0
+    assert copied["is_success"] is False and "proximity" in copied["reward_terms"]
 
 
 def test_the_env_observes_through_odometry_not_the_true_pose():

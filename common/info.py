@@ -1,0 +1,19 @@
+"""The dicts an env step reports (``info``), deep-copied as cheaply as they can be."""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+_IMMUTABLE = frozenset({bool, int, float, str, type(None)})
+
+
+class Info(dict):
+    """A dict whose deep copy copies only the values that could change (an array, a nested
+    :class:`Info`) and shares the numbers and strings, as a deep copy may: stable-baselines3's
+    DummyVecEnv deep-copies every env's info at every step, and Python's generic deep copy, key
+    by key and value by value, took a sixth of PPO's training time on the main job."""
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> Info:
+        return type(self)({key: value if type(value) in _IMMUTABLE else copy.deepcopy(value, memo)
+                           for key, value in self.items()})
