@@ -51,6 +51,10 @@ def _components(action, size: int = 2) -> tuple[float, ...]:
     "05" would otherwise read as two digits) or a non-finite value: a NaN let through would
     silently corrupt the robot's pose and every observation after it."""
     array = isinstance(action, np.ndarray)
+    if array and action.dtype.kind == "f" and action.shape == (size,):
+        values = action.tolist()
+        if all(map(math.isfinite, values)):  # the policies' actions: one check instead of the general path's five
+            return tuple(values)
     try:
         shape = action.shape if array else None if isinstance(action, (str, bytes)) else np.shape(action)
     except ValueError:  # numpy refuses a ragged sequence such as [1, [2, 3]]

@@ -61,6 +61,7 @@ class NavigationEnv(gym.Env):
         self.action_mapping = action_mapping
         self.goal_distance_scale = goal_distance_scale
         self.reward = Reward(reward)
+        self._reads_heading = "heading_alignment" in self.reward.spec  # else the step skips the bearing
         self.world: WorldLike | None = None
         self._drawn: Scenario | None = None
         self._load(self.source.draw(np.random.default_rng(0)))
@@ -134,8 +135,10 @@ class NavigationEnv(gym.Env):
         task, previous = self.task, self.task.distance
         outcome = task.step(readings)
         reached = outcome == "success"
-        x, y, yaw = readings.pose
-        bearing = wrap_angle(math.atan2(self._goal[1] - y, self._goal[0] - x) - yaw)
+        bearing = 0.0
+        if self._reads_heading:
+            x, y, yaw = readings.pose
+            bearing = wrap_angle(math.atan2(self._goal[1] - y, self._goal[0] - x) - yaw)
         clearance = math.inf if self._reach is None else nearest_clearance(readings.lidar, self._reach)
         ctx = StepContext(task.distance, previous, bearing, v, w, nearest_return(readings.lidar), readings.collided, reached,
                           clearance)

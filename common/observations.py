@@ -84,7 +84,7 @@ from gymnasium import spaces
 
 from common.errors import ConfigError, quote
 from common.geometry import sensor_origin
-from common.kernel_cache import kernel
+from common.kernel_cache import kernel, uncounted
 from common.kinematics import wrap_angle
 from common.readings import Readings
 from common.robots import footprint_reach
@@ -118,10 +118,11 @@ class ObservationLayout:
         self.forget()
 
 
-def _goal_terms(readings: Readings, goal: tuple[float, float], scale: float) -> tuple[float, float, float, float]:
-    """Goal direction (x, y), heading error / pi and the scaled goal distance, from the odometry pose."""
-    x, y, yaw = readings.odometry.pose
-    dx, dy = goal[0] - x, goal[1] - y
+@uncounted
+def goal_terms(x: float, y: float, yaw: float, goal_x: float, goal_y: float,
+               scale: float) -> tuple[float, float, float, float]:
+    """Goal direction (x, y), heading error / pi and the scaled goal distance, from the pose (x, y, yaw)."""
+    dx, dy = goal_x - x, goal_y - y
     distance = math.hypot(dx, dy)
     inv = 1.0 / max(distance, 1e-6)
     return dx * inv, dy * inv, wrap_angle(math.atan2(dy, dx) - yaw) / math.pi, distance / scale
@@ -136,8 +137,9 @@ def sector_bounds(beams: int, sectors: int) -> np.ndarray:
 
 
 @kernel
-def _encode(out, goal, v, w, yaw_rate, ranges, bounds, inv_range, floor, log_scale, low, high):
-    """Fill ``out``: the goal terms (x, y, heading, distance: ``_goal_terms``) at 0-2 and last, v
+def _encode(out, pose, goal, scale, v, w, yaw_rate, ranges, bounds, inv_range, floor, log_scale, low, high):
+    """Fill ``out``: the goal terms from the odometry ``pose`` (x, y, heading, distance scaled by
+    ``scale``: :func:`goal_terms`) at 0-2 and last, v
     and w at 3-4, the yaw rate at 5 where the sectors start at 6, then each sector's nearest return,
     linear (r / range_max) or, with ``log_scale`` > 0, log(max(r, floor) / floor) * log_scale; then
     clip all of ``out`` into [low, high]. One compiled call: element writes from Python cost more than
@@ -147,7 +149,7 @@ def _encode(out, goal, v, w, yaw_rate, ranges, bounds, inv_range, floor, log_sca
     np.minimum/maximum, the clip does not pass NaN through: no lidar here returns one."""
     n = out.shape[0]
     first = n - 1 - bounds.shape[0]
-    out[0], out[1], out[2], out[n - 1] = goal
+    out[0], out[1], out[2], out[n - 1] = goal_terms(pose[0], pose[1], pose[2], goal[0], goal[1], scale)
     out[3], out[4] = v, w
     if first > 5:
         out[5] = yaw_rate
@@ -178,7 +180,7 @@ def make_layout(
         def compute(readings: Readings, goal: tuple[float, float]) -> np.ndarray:
             out = np.empty(7, dtype=np.float32)
             odometry = readings.odometry
-            _encode(out, _goal_terms(readings, goal, goal_distance_scale), odometry.v * inv_v, odometry.w * inv_w, 0.0,
+            _encode(out, odometry.pose, goal, goal_distance_scale, odometry.v * inv_v, odometry.w * inv_w, 0.0,
                     readings.lidar, whole_scan, inv_r, 1.0, 0.0, low, high)
             return out
 
@@ -208,7 +210,7 @@ def _sector_layout(name: str, robot: RobotProfile, lidar: LidarSpec, goal_distan
         out = np.empty(43, dtype=np.float32)
         odometry = readings.odometry
         ranges = readings.lidar if shift is None else readings.lidar + shift
-        _encode(out, _goal_terms(readings, goal, goal_distance_scale), odometry.v * inv_v, odometry.w * inv_w,
+        _encode(out, odometry.pose, goal, goal_distance_scale, odometry.v * inv_v, odometry.w * inv_w,
                 readings.imu.angular_velocity[2] * inv_w, ranges, bounds, inv_range, floor, log_scale, low, high)
         return out
 

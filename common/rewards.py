@@ -25,7 +25,7 @@ class StepContext(NamedTuple):
 
     distance: float  # to the goal, after the step
     prev_distance: float  # to the goal, before the step
-    heading_error: float  # goal bearing minus yaw, wrapped to [-pi, pi)
+    heading_error: float  # goal bearing minus yaw, wrapped to [-pi, pi) (0 where no term reads it)
     v: float  # commanded linear velocity, m/s
     w: float  # commanded angular velocity, rad/s
     min_range: float  # nearest lidar return, m

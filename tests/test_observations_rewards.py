@@ -173,6 +173,21 @@ def test_the_env_pays_proximity_on_the_nearest_lidar_return():
     assert observation[5] == pytest.approx(nearest / 5.0)  # nav7's nearest return
 
 
+def test_the_env_pays_heading_alignment_on_the_bearing_to_the_goal():
+    from common.scenario import Scenario
+
+    # The step works the bearing out only for a reward that reads it: facing the goal pays 1,
+    # facing away 1 - pi, and a reward without the term is not paid for it.
+    for yaw, paid in ((0.0, 1.0), (math.pi, 1.0 - math.pi), (math.pi / 2, 1.0 - math.pi / 2)):
+        env = _flat_env(Scenario(start=(2.0, 5.0, yaw), goal=(8.0, 5.0)), observation="nav7",
+                        reward={"heading_alignment": 1.0, "time": 0.0})
+        env.reset(seed=0)
+        assert env.step(STAND_STILL)[4]["reward_terms"]["heading_alignment"] == pytest.approx(paid, abs=1e-9)
+    env = _flat_env(Scenario(start=(2.0, 5.0, math.pi), goal=(8.0, 5.0)), observation="nav7", reward={"time": -1.0})
+    env.reset(seed=0)
+    assert env.step(STAND_STILL)[1] == -1.0
+
+
 def test_a_deep_copy_of_a_step_info_is_equal_and_independent():
     import copy
 
