@@ -10,7 +10,7 @@ import os
 import tempfile
 import time
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import yaml
@@ -384,16 +384,25 @@ def frozen(scenario: Scenario) -> Scenario:
         for obstacle in scenario.obstacles]})
 
 
+def fastest_alternated(measures: dict[str, Callable[[], Any]], runs: int) -> dict[str, Any]:
+    """Each measure's largest result over ``runs`` rounds, the measures alternated within a round:
+    on this noisy machine one run strayed by a quarter, and alternating spreads a slow minute
+    over both sides of a ratio."""
+    results: dict[str, list[Any]] = {name: [] for name in measures}
+    for _ in range(runs):
+        for name, measure in measures.items():
+            results[name].append(measure())
+    return {name: max(values) for name, values in results.items()}
+
+
 def movers_figures(steps: int) -> dict[str, Any]:
-    """The env among 20 walking people against the same world frozen (each setting's faster of two
-    alternated runs: this machine is noisy), and IR-SIM's own steps on the same moving world."""
+    """The env among 20 walking people against the same world frozen (each setting's fastest of
+    three alternated runs), and IR-SIM's own steps on the same moving world."""
     moving = moving_bench_scenario()
     still = frozen(moving)
-    runs: dict[str, list[float]] = {"moving": [], "frozen": []}
-    for _ in range(2):
-        runs["moving"].append(flatland_steps_per_s(moving, steps))
-        runs["frozen"].append(flatland_steps_per_s(still, steps))
-    flat, static = max(runs["moving"]), max(runs["frozen"])
+    fastest = fastest_alternated({"moving": lambda: flatland_steps_per_s(moving, steps),
+                                  "frozen": lambda: flatland_steps_per_s(still, steps)}, runs=3)
+    flat, static = fastest["moving"], fastest["frozen"]
     theirs = irsim_steps_per_s(moving, steps=max(300, steps // 40))
     return {"movers_env_steps_per_s": round(flat, 1), "movers_frozen_env_steps_per_s": round(static, 1),
             "movers_vs_static": round(flat / static, 3),
@@ -402,17 +411,15 @@ def movers_figures(steps: int) -> dict[str, Any]:
 
 
 def movers3d_figures(steps: int) -> dict[str, Any]:
-    """The 3D env among 10 walking people against the same world frozen (each setting's faster of
-    two alternated runs)."""
+    """The 3D env among 10 walking people against the same world frozen (each setting's fastest
+    of three alternated runs)."""
     from physics3d.robot import TEMPLATE
 
     moving = moving_bench_scenario(people=10, template=TEMPLATE)
     still = frozen(moving)
-    runs: dict[str, list[float]] = {"moving": [], "frozen": []}
-    for _ in range(2):
-        runs["moving"].append(physics3d_steps_per_s(moving, steps)[0])
-        runs["frozen"].append(physics3d_steps_per_s(still, steps)[0])
-    flat, static = max(runs["moving"]), max(runs["frozen"])
+    fastest = fastest_alternated({"moving": lambda: physics3d_steps_per_s(moving, steps)[0],
+                                  "frozen": lambda: physics3d_steps_per_s(still, steps)[0]}, runs=3)
+    flat, static = fastest["moving"], fastest["frozen"]
     return {"physics3d_movers_steps_per_s": round(flat, 1), "physics3d_movers_frozen_steps_per_s": round(static, 1),
             "physics3d_movers_vs_static": round(flat / static, 3)}
 
@@ -503,12 +510,10 @@ def _timed(method, spent: dict[str, float], name: str):
 def _ppo_figures(steps: int) -> dict[str, float]:
     # Each setting's best of two, alternated: one round of these few-second runs swung the ratio
     # from 0.96 to 0.80 between two benches of the same code on this noisy machine.
-    runs: dict[tuple[str, str], list[tuple[float, float]]] = {
-        ("sparse", "dummy"): [], ("cluttered", "dummy"): [], ("cluttered", "subproc"): []}
-    for _ in range(2):
-        for (kind, vec_env), measured in runs.items():
-            measured.append(ppo_steps_per_s(kind, steps, vec_env=vec_env))
-    (sparse, sparse_share), (cluttered, cluttered_share), (subproc, _) = (max(measured) for measured in runs.values())
+    fastest = fastest_alternated({f"{kind} {vec_env}": lambda kind=kind, vec_env=vec_env: ppo_steps_per_s(
+        kind, steps, vec_env=vec_env) for kind, vec_env in (("sparse", "dummy"), ("cluttered", "dummy"),
+                                                            ("cluttered", "subproc"))}, runs=2)
+    (sparse, sparse_share), (cluttered, cluttered_share), (subproc, _) = fastest.values()
     return {"ppo_steps_per_s_sparse": round(sparse, 1), "ppo_steps_per_s_cluttered": round(cluttered, 1),
             "ppo_cluttered_vs_sparse": round(cluttered / sparse, 3),
             "ppo_steps_per_s_cluttered_subproc": round(subproc, 1), "ppo_subproc_vs_dummy": round(subproc / cluttered, 3),
