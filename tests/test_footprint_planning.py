@@ -112,7 +112,8 @@ def test_a_rectangle_stands_in_a_gap_head_on_that_its_bounding_circle_does_not_f
     assert true_clearance(scenario, long, 3.0, 2.0, 0.5 * math.pi) < 0.0
 
 
-@pytest.mark.parametrize("planner", [AStar(), RRT(seed=0, max_iterations=20000)], ids=["astar", "rrt"])
+@pytest.mark.parametrize("planner", [AStar(), RRT(seed=0, max_iterations=20000), RRT(seed=0, optimise=True)],
+                         ids=["astar", "rrt", "rrt_star"])
 def test_a_plan_threads_the_gap_and_every_pose_driven_along_it_clears_the_true_obstacles(planner):
     scenario = gap_world(1.5 * WIDE.width, WIDE)
     grid = FootprintGrid(obstacle_cells(scenario), Footprint.of(WIDE), margin=0.01)
@@ -141,7 +142,7 @@ def corridors_through_a_room(width: float, room: float, resolution: float = 0.02
     return OccupancyGrid(~(east | north | square), (0.0, 0.0), resolution)
 
 
-@pytest.mark.parametrize("planner", [AStar(), RRT(seed=0)], ids=["astar", "rrt"])
+@pytest.mark.parametrize("planner", [AStar(), RRT(seed=0), RRT(seed=0, optimise=True)], ids=["astar", "rrt", "rrt_star"])
 def test_a_rectangle_that_cannot_turn_in_the_room_between_two_corridors_is_not_planned_through_it(planner):
     # It drives each corridor head-on (0.43 m in 0.52 m) and stands in the 0.6 m room facing
     # either way, but turning there takes 0.67 m (its bounding circle; 0.66 m at 45 degrees).
@@ -185,6 +186,48 @@ def test_a_turn_is_checked_at_headings_a_few_degrees_apart():
     assert grid.pose_free(0.0, 0.0, 0.0) and grid.pose_free(0.0, 0.0, 0.5 * math.pi)
     assert not grid.turn_free(0.0, 0.0, 0.0, 0.5 * math.pi)
     assert TURN_STEP <= math.radians(20)
+
+
+def two_gaps(robot: RobotProfile) -> Scenario:
+    """An 8 x 6 m world cut by a wall across x = 4: a gap two robot widths across on the straight
+    line from the start to the goal, and one 2 m wide 3 m off it."""
+    narrow = 2.0 * robot.width_across
+
+    def wall(y0: float, y1: float) -> BoxObstacle:
+        return BoxObstacle(x=4.0, y=0.5 * (y0 + y1), length=0.2, width=y1 - y0, yaw=0.0)
+
+    return Scenario(world=WorldSpec(width=8.0, height=6.0, walls=False), robot=robot,
+                    obstacles=[wall(0.0, 1.5 - 0.5 * narrow), wall(1.5 + 0.5 * narrow, 3.5), wall(5.5, 6.0)],
+                    start=(1.0, 1.5, 0.0), goal=(7.0, 1.5))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_rrt_pursuit_plans_the_shorter_of_two_gaps_whatever_its_seed(seed):
+    """Its planner refines the route over its whole budget (informed RRT*): plain RRT returned the
+    first route its tree found, most seeds through the wide gap (8.6-11.6 m), another each replan."""
+    robot = robot_profile("physics3d")
+    scenario = two_gaps(robot)
+    grid = FootprintGrid(obstacle_cells(scenario), Footprint.of(robot), margin=0.02)
+    pursuit = make_controller("rrt_pursuit", {"seed": seed})
+    pursuit.reset()
+    for _ in range(2):  # a replan, on fresh samples, agrees
+        path = pursuit.planner.plan(grid, scenario.start, scenario.goal)
+        assert path is not None and grid.path_free(path, 0.0)
+        assert path_length(path) < 6.1  # the straight 6 m through the narrow gap
+
+
+@pytest.mark.parametrize("optimise", [False, True])
+def test_rrt_plans_from_a_heading_that_keeps_no_margin_where_another_does(optimise):
+    """A robot standing closer than the margin to a return facing its way (as a follower ends up
+    in a tight gap) may still face another: checking the turn from its own heading refused every
+    edge, and the pursuit stood still for the rest of the episode."""
+    robot = robot_profile("physics3d")
+    occupied = np.zeros((80, 80), dtype=bool)
+    occupied[40, 44] = True  # its centre 0.075 m ahead of the robot at (2, 2) facing +x, 0.105 m beside it facing +y
+    grid = FootprintGrid(OccupancyGrid(occupied, (0.0, 0.0), RESOLUTION), Footprint.of(robot), margin=0.05)
+    assert not grid.pose_free(2.0, 2.0, 0.0) and grid.pose_free(2.0, 2.0, 0.5 * math.pi)
+    path = RRT(seed=0, optimise=optimise).plan(grid, (2.0, 2.0, 0.0), (2.0, 3.5))
+    assert path is not None and grid.path_free(path)
 
 
 def test_keep_clear_moves_a_path_off_a_post_and_keeps_it_free():

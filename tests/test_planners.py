@@ -13,6 +13,7 @@ from common.controllers.base import LidarGeometry
 from common.generators import generate
 from common.occupancy import OccupancyGrid, ScanMapper, inflate, scenario_grid
 from common.planners import PLANNERS, RRT, AStar, path_length, shortcut
+from common.planners.rrt import _bin, _nearest_k
 from common.scenario import BoxObstacle, LidarSpec, Scenario
 from flatland.world import World
 
@@ -169,15 +170,45 @@ def test_rrt_goes_round_a_wall():
     assert_stays_free(grid, path, spacing=0.1)  # RRT's own check samples at half a cell
 
 
-def test_rrt_is_deterministic_per_seed():
+@pytest.mark.parametrize("optimise", [False, True])
+def test_rrt_is_deterministic_per_seed(optimise):
     grid = walled()
-    plan = lambda seed: RRT(step_size=0.5, seed=seed).plan(grid, centre(grid, 0, 2), centre(grid, 0, 8))
+    plan = lambda seed: RRT(step_size=0.5, seed=seed, optimise=optimise).plan(grid, centre(grid, 0, 2),
+                                                                             centre(grid, 0, 8))
     first = plan(4)
     assert first is not None
     assert np.array_equal(first, plan(4))
     assert not np.array_equal(first, plan(5))
-    shared = RRT(step_size=0.5, rng=np.random.default_rng(4))
+    shared = RRT(step_size=0.5, rng=np.random.default_rng(4), optimise=optimise)
     assert np.array_equal(first, shared.plan(grid, centre(grid, 0, 2), centre(grid, 0, 8)))
+
+
+def test_an_optimising_rrt_comes_near_the_shortest_path_round_a_wall():
+    grid = walled()
+    start, goal = centre(grid, 0, 2), centre(grid, 0, 8)
+    # Up to the wall's end (x 5 to 6 below y = 8), along it, and down.
+    shortest = 2.0 * math.hypot(2.5, 7.5) + 1.0
+    plain = [path_length(RRT(step_size=0.5, seed=seed).plan(grid, start, goal)) for seed in range(3)]
+    best = [path_length(RRT(step_size=0.5, seed=seed, optimise=True).plan(grid, start, goal)) for seed in range(3)]
+    assert max(best) < 1.05 * shortest < min(plain)
+
+
+def test_the_rrt_star_neighbour_bins_find_what_a_linear_scan_finds():
+    rng = np.random.default_rng(0)
+    x0, y0, side, rows, cols = -1.0, 2.0, 0.3, 12, 20
+    nodes = np.column_stack([x0 + rng.random(300) * cols * side, y0 + rng.random(300) * rows * side])
+    head, next_in_bin = np.full((rows, cols), -1, dtype=np.int64), np.empty(300, dtype=np.int64)
+    for j, (x, y) in enumerate(nodes):
+        _bin(head, next_in_bin, x0, y0, side, j, x, y)
+    out, out_d = np.empty(300, dtype=np.int64), np.empty(300)
+    queries = np.vstack([nodes[:5] + 0.01, rng.uniform((x0 - 3.0, y0 - 3.0), (x0 + 9.0, y0 + 7.0), (40, 2))])
+    for qx, qy in queries:  # inside the binned area and beyond it
+        d = np.hypot(nodes[:, 0] - qx, nodes[:, 1] - qy)
+        for k, skip in ((1, -1), (1, int(np.argmin(d))), (25, -1)):
+            found = _nearest_k(nodes, head, next_in_bin, x0, y0, side, qx, qy, k, skip, out, out_d)
+            expected = [j for j in np.argsort(d) if j != skip][:k]
+            assert found == k and out[:k].tolist() == expected
+            assert np.allclose(out_d[:k], d[expected])
 
 
 def test_rrt_no_path_when_walled_off_or_ends_blocked():

@@ -9,7 +9,9 @@ where it starts and where it must go, not the world's size.
 
 The planners check the footprint itself, heading included (:mod:`common.planners.footprint`): a
 rectangle passes a gap its bounding circle would not. A* searches positions and headings and
-prefers the middle of gaps; the plan is then shortcut where a straight line keeps a wider
+prefers the middle of gaps; RRT is informed RRT*, whose routes approach the shortest: the first
+route a plain RRT's tree happens on changes from replan to replan, and the robot drives back and
+forth between them. The plan is then shortcut where a straight line keeps a wider
 ``open_clearance`` (in the open) and kept as planned where it does not (in the gaps). Pure
 pursuit follows it, its lookahead and speed shrinking with the footprint's clearance, so the
 robot threads a gap slowly along its middle and drives fast in the open.
@@ -97,7 +99,7 @@ class PathFollower(Controller):
 
     def reset(self) -> None:
         planner = PLANNERS[self.default_planner]
-        self.planner = planner(seed=self.seed) if self.default_planner == "rrt" else planner()
+        self.planner = planner(seed=self.seed, optimise=True) if self.default_planner == "rrt" else planner()
         self.mapper: ScanMapper | None = None
         self._grid: FootprintGrid | None = None
         self._stale = False
@@ -231,7 +233,8 @@ class AStarPursuit(PathFollower):
 
 
 class RrtPursuit(PathFollower):
-    """RRT for the footprint on the scan-built grid, its path kept clear of what it passes, followed by pure pursuit."""
+    """Informed RRT* for the footprint on the scan-built grid, its path kept clear of what it passes, followed by
+    pure pursuit."""
 
     default_planner = "rrt"
     keeps_clear = True  # A*'s costs already keep its path to the middle of gaps
