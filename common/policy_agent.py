@@ -22,14 +22,17 @@ class PolicyAgent:
 
     It builds its observations with the layout in its manifest, so evaluation in either tier
     sees what the policy saw in training. ``model`` is anything with SB3's ``predict``: a
-    policy network or a whole algorithm. ``max_steps`` is the episode length it trained with.
+    policy network or a whole algorithm; ``predict``, if given, computes the same deterministic
+    action faster. ``max_steps`` is the episode length it trained with.
     """
 
     def __init__(self, model, observation: str, goal_distance_scale: float,
                  normalizer: Callable[[np.ndarray], np.ndarray] | None = None, name: str = "policy",
                  action_mapping: str = "linear", max_steps: int | None = None, env_kwargs: dict | None = None,
-                 home: tuple[str, str, int, int] | None = None) -> None:
+                 home: tuple[str, str, int, int] | None = None,
+                 predict: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
         self.model, self.observation, self.goal_distance_scale = model, observation, goal_distance_scale
+        self.predict = predict  # the deterministic action of one observation, if not model.predict's
         self.normalizer, self.name, self.action_mapping = normalizer, name, action_mapping
         self.max_steps = max_steps
         self.env_kwargs = dict(env_kwargs or {})  # what it trained with: its conditions are evaluated by default
@@ -49,5 +52,7 @@ class PolicyAgent:
         return self.normalizer(obs) if self.normalizer is not None else obs
 
     def act(self, readings: Readings, goal: tuple[float, float]) -> tuple[float, float]:
-        action, _ = self.model.predict(self.observe(readings, goal), deterministic=True)
-        return self.mapping.to_velocity(action)
+        observation = self.observe(readings, goal)
+        if self.predict is not None:
+            return self.mapping.to_velocity(self.predict(observation))
+        return self.mapping.to_velocity(self.model.predict(observation, deterministic=True)[0])

@@ -228,3 +228,17 @@ def test_a_curriculum_refuses_policy_kwargs_its_algorithm_does_not_take(algorith
     with pytest.raises(ConfigError) as error:
         curriculum_from_mapping({"name": "c", "stages": [stage]}, "c.yaml")
     assert str(error.value) == f"c.yaml: stages.0.hyperparams.policy_kwargs.{problem}"
+
+
+@pytest.mark.parametrize("name", ["stage1_2d_ppo", "curriculum_2d_ppo", "stage1_2d_sac"])
+def test_a_loaded_policy_acts_as_predict_does_for_every_observation(name):
+    # The agent's own deterministic action skips stable-baselines3's per-call bookkeeping; it must
+    # give predict's action to the bit: PPO's clipped into the bounds (curriculum_2d_ppo's mean is
+    # not bounded), SAC's unscaled from its squashed output, and predict's own in training mode.
+    agent = load_policy(Path(__file__).resolve().parents[1] / "curricula" / "policies" / f"{name}.zip")
+    observations = np.random.default_rng(0).uniform(-3.0, 3.0, (500, agent.model.observation_space.shape[0]))
+    observations = observations.astype(np.float32)
+    for observation in observations:
+        assert np.array_equal(agent.predict(observation), agent.model.predict(observation, deterministic=True)[0])
+    agent.model.set_training_mode(True)
+    assert np.array_equal(agent.predict(observations[0]), agent.model.predict(observations[0], deterministic=True)[0])

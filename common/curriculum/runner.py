@@ -25,7 +25,7 @@ from common.atomic import atomic_write
 from common.conditions import conditions_of
 from common.curriculum.comparison import write_csv
 from common.curriculum.hyperparams import resolve_hyperparams
-from common.curriculum.policy import algorithm_class, load_weights, policy_class, vec_env_class
+from common.curriculum.policy import DeterministicAction, algorithm_class, load_weights, policy_class, vec_env_class
 from common.curriculum.policy_file import Normalizer, update_manifest
 from common.curriculum.replay import load_replay
 from common.curriculum.run_directory import (LOCK_NAME, MARKER, EvalLog, StagePaths, check_claimable, clear_unstarted,
@@ -286,7 +286,8 @@ class Runner:
                        seed_shift: int) -> Summary:
         """Success and SPL of the current model on the stage's eval suite (a held-out draw)."""
         agent = PolicyAgent(model, stage.observation, DEFAULT_GOAL_DISTANCE_SCALE, normalizer, name=stage.name,
-                            action_mapping=stage.action_mapping, max_steps=stage.max_steps)
+                            action_mapping=stage.action_mapping, max_steps=stage.max_steps,
+                            predict=DeterministicAction(model.policy))
         (summary,) = evaluate([agent], stage_scenarios(stage, episodes, seed_shift), stage.world, seed=seed_shift,
                               max_steps=stage.max_steps, conditions=conditions_of(stage.env_kwargs),
                               goal_radius=stage_radius(stage))
