@@ -98,20 +98,9 @@ def rectangle_outline(length: float, width: float, wheelbase: float = 0.0) -> np
 @uncounted
 def placed(outline: np.ndarray, i: int, x: float, y: float, cos_t: float, sin_t: float) -> tuple[float, float]:
     """Vertex ``i`` of ``outline`` as IR-SIM's ``geometry_transform`` places it at (x, y) turned by
-    the angle of cosine ``cos_t`` and sine ``sin_t`` (np.cos / np.sin of a float64 scalar are libm's,
-    as math's are)."""
+    the angle of cosine ``cos_t`` and sine ``sin_t``."""
     px, py = outline[i, 0], outline[i, 1]
     return px * cos_t - py * sin_t + x, px * sin_t + py * cos_t + y
-
-
-@register_jitable
-def transformed(outline: np.ndarray, x: float, y: float, theta: float) -> np.ndarray:
-    """IR-SIM's ``geometry_transform(geometry, [x, y, theta])`` applied to a ring's coordinates."""
-    c, s = math.cos(theta), math.sin(theta)
-    out = np.empty_like(outline)
-    for i in range(outline.shape[0]):
-        out[i, 0], out[i, 1] = placed(outline, i, x, y, c, s)
-    return out
 
 
 @uncounted
@@ -123,7 +112,7 @@ def centroid(outline: np.ndarray, x: float = 0.0, y: float = 0.0, theta: float =
     ``Centroid::addShell`` multiplies each triangle by +1 or -1 after the ring's orientation; negation
     is exact and rounding symmetric, so both signs end in the same quotient and none is needed here.
     """
-    c, s = math.cos(theta), math.sin(theta)
+    c, s = math.cos(theta), math.sin(theta)  # libm's, as IR-SIM's np.cos / np.sin of a float64 scalar
     base_x, base_y = placed(outline, 0, x, y, c, s)
     cg3_x = cg3_y = area_sum2 = 0.0
     x1, y1 = base_x, base_y

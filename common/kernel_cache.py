@@ -95,7 +95,7 @@ kernel = cached_kernels(ROOT, KERNEL_MODULES)
 
 # A function compiled into the kernels that call it, without numba's reference counting: numba
 # counts references to every array a compiled function is handed (two atomic operations per array
-# per call), which took a third of a crowd's step in calls to small helpers. Such a function must
+# per call), which took a third of the movers' compiled step in calls to small helpers. Such a function must
 # not allocate, nor call one that does: numba refuses to compile it then.
 uncounted = register_jitable(_nrt=False)
 

@@ -61,7 +61,7 @@ class NavigationEnv(gym.Env):
         self.action_mapping = action_mapping
         self.goal_distance_scale = goal_distance_scale
         self.reward = Reward(reward)
-        self._reads_heading = "heading_alignment" in self.reward.spec  # else the step skips the bearing
+        self._reads_heading = self.reward.reads("heading_error")
         self.world: WorldLike | None = None
         self._drawn: Scenario | None = None
         self._load(self.source.draw(np.random.default_rng(0)))
@@ -98,8 +98,8 @@ class NavigationEnv(gym.Env):
                                  "scenarios must share the robot's kinematics")
             self.layout = self._make_layout(scenario)
             self.actions = ActionMapping(scenario.robot, self.action_mapping)
-            # Per beam, how far it runs inside the footprint: only a reward that prices clearance reads it.
-            self._reach = footprint_reach(scenario.robot, scenario.lidar) if "clearance" in self.reward.spec else None
+            # Per beam, how far it runs inside the footprint, for a reward that reads the clearance.
+            self._reach = footprint_reach(scenario.robot, scenario.lidar) if self.reward.reads("clearance") else None
         self._goal = scenario.goal
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:

@@ -53,6 +53,6 @@ class PolicyAgent:
 
     def act(self, readings: Readings, goal: tuple[float, float]) -> tuple[float, float]:
         observation = self.observe(readings, goal)
-        if self.predict is not None:
-            return self.mapping.to_velocity(self.predict(observation))
-        return self.mapping.to_velocity(self.model.predict(observation, deterministic=True)[0])
+        action = self.predict(observation) if self.predict is not None else \
+            self.model.predict(observation, deterministic=True)[0]
+        return self.mapping.to_velocity(action)

@@ -25,13 +25,13 @@ class StepContext(NamedTuple):
 
     distance: float  # to the goal, after the step
     prev_distance: float  # to the goal, before the step
-    heading_error: float  # goal bearing minus yaw, wrapped to [-pi, pi) (0 where no term reads it)
+    heading_error: float  # goal bearing minus yaw, wrapped to [-pi, pi) (see COSTLY_FIELDS)
     v: float  # commanded linear velocity, m/s
     w: float  # commanded angular velocity, rad/s
     min_range: float  # nearest lidar return, m
     collided: bool
     reached: bool
-    clearance: float = math.inf  # nearest return less how far its beam runs inside the footprint, m
+    clearance: float = math.inf  # nearest return less how far its beam runs inside the footprint, m (see COSTLY_FIELDS)
 
 
 def progress(ctx: StepContext, positive_only: bool = False) -> float:
@@ -156,6 +156,11 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
+# The step context's fields that cost the env a computation each step, and the terms that read
+# each: a reward without those terms gets 0 (heading_error) or inf (clearance) there.
+COSTLY_FIELDS = {"heading_error": ("heading_alignment",), "clearance": ("clearance",)}
+
+
 class Reward:
     """A weighted sum of terms. Call :meth:`reset` at each episode start.
 
@@ -176,6 +181,11 @@ class Reward:
             else:
                 fn = functools.partial(TERMS[name], **params) if params else TERMS[name]
             self._terms.append((name, weight, fn))
+
+    def reads(self, field: str) -> bool:
+        """Whether a term of this reward reads the step context's ``field``, one of
+        :data:`COSTLY_FIELDS` (the env works those out only for a reward that reads them)."""
+        return any(term in self.spec for term in COSTLY_FIELDS[field])
 
     def reset(self) -> None:
         """Forget per-episode state (e.g. the stuck detector's history)."""

@@ -63,8 +63,8 @@ def free_step(x, y, yaw, odometry_x, odometry_y, odometry_yaw, v, w, constants, 
 @functools.cache
 def free_step_code() -> Callable:
     """:func:`free_step`'s machine code for the arrays a world hands it (every one float64 and
-    C-contiguous): called directly, it skips the dispatcher's matching of its 15 arguments' types,
-    a tenth of a free step's cost."""
+    C-contiguous): called directly, it skips the dispatcher's matching of its 15 arguments' types
+    (about 0.4 µs of IR-SIM's circle world's 16 µs env step)."""
     table = np.empty((0, 4))
     return compiled_for(free_step, *(0.0,) * 8, np.empty(10), np.empty((0, 3)), np.empty((0, 6)), table, table,
                         np.empty(0), np.empty(8))

@@ -20,6 +20,12 @@ ROUND_RADII = (0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.5, 0.75, 1.0, 1.5, 
 SPECIAL_THETAS = (0.0, math.pi, -math.pi, math.pi / 2, -math.pi / 2, math.pi / 4, 1e-17)
 
 
+def transformed(outline: np.ndarray, x: float, y: float, theta: float) -> np.ndarray:
+    """The ring as the centroid places it vertex by vertex (:func:`common.irsim_geometry.placed`)."""
+    c, s = math.cos(theta), math.sin(theta)
+    return np.array([g.placed(outline, i, x, y, c, s) for i in range(len(outline))])
+
+
 def circles(n: int, seed: int) -> list[tuple[float, float, float]]:
     """(radius, cx, cy): round and random radii, centred at the origin, off it, or shifted by a wheelbase."""
     rng = np.random.default_rng(seed)
@@ -106,15 +112,15 @@ def test_rectangle_outline_is_irsims_polygon():
 def test_centroid_is_geos_centroid_of_transformed_circles_and_rectangles():
     for (radius, cx, cy), (x, y, theta) in zip(circles(3000, seed=3), states(3000, seed=4)):
         outline = g.circle_outline(radius, cx, cy)
-        for ring in (outline, g.transformed(outline, x, y, theta)):
+        for ring in (outline, transformed(outline, x, y, theta)):
             c = shapely.Polygon(ring).centroid
             assert g.centroid(ring) == (c.x, c.y), (radius, cx, cy, x, y, theta)
         # Placed as it is read: the same bits as the placed ring's.
         assert g.centroid(outline, x, y, theta) == (c.x, c.y), (radius, cx, cy, x, y, theta)
     for (length, width, wheelbase), (x, y, theta) in zip(rectangles(3000, seed=5), states(3000, seed=6)):
         outline = our_rectangle(length, width, wheelbase)
-        c = shapely.Polygon(g.transformed(outline, x, y, theta)).centroid
-        assert g.centroid(g.transformed(outline, x, y, theta)) == g.centroid(outline, x, y, theta) == (c.x, c.y), \
+        c = shapely.Polygon(transformed(outline, x, y, theta)).centroid
+        assert g.centroid(transformed(outline, x, y, theta)) == g.centroid(outline, x, y, theta) == (c.x, c.y), \
             (length, width, wheelbase, x, y, theta)
     # The ulps are real: the origin circle's centroid is not the origin, and ours is GEOS's.
     c = shapely.Point(0, 0).buffer(1.0).centroid
@@ -123,7 +129,7 @@ def test_centroid_is_geos_centroid_of_transformed_circles_and_rectangles():
 
 def test_centroid_of_a_ring_without_area_is_geos_line_or_point_centroid():
     for (length, width), (x, y, theta) in zip([(1.0, 0.0), (0.0, 2.5), (0.0, 0.0), (3.7, 0.0)] * 25, states(100, seed=7)):
-        ring = g.transformed(g.rectangle_outline(length, width), x, y, theta)
+        ring = transformed(g.rectangle_outline(length, width), x, y, theta)
         c = shapely.Polygon(ring).centroid
         assert g.centroid(ring) == g.centroid(g.rectangle_outline(length, width), x, y, theta) == (c.x, c.y), \
             (length, width, x, y, theta)
@@ -132,11 +138,11 @@ def test_centroid_of_a_ring_without_area_is_geos_line_or_point_centroid():
 def test_bounding_radius_is_geos_minimum_bounding_radius():
     for (radius, cx, cy), (x, y, theta) in zip(circles(1500, seed=8), states(1500, seed=9)):
         original = g.circle_outline(radius, cx, cy)
-        for ring in (original, g.transformed(original, x, y, theta)):
+        for ring in (original, transformed(original, x, y, theta)):
             assert g.bounding_radius(ring) == shapely.minimum_bounding_radius(shapely.Polygon(ring)), (radius, cx, cy, x, y, theta)
     for (length, width, wheelbase), (x, y, theta) in zip(rectangles(1500, seed=10), states(1500, seed=11)):
         original = our_rectangle(length, width, wheelbase)
-        for ring in (original, g.transformed(original, x, y, theta)):
+        for ring in (original, transformed(original, x, y, theta)):
             assert g.bounding_radius(ring) == shapely.minimum_bounding_radius(shapely.Polygon(ring)), (length, width, x, y, theta)
     # Not the radius itself: IR-SIM's 0.2 m robot is 0.20000000000000004 m to GEOS.
     assert g.bounding_radius(g.circle_outline(0.2)) == shapely.minimum_bounding_radius(shapely.Point(0, 0).buffer(0.2)) != 0.2
@@ -154,13 +160,13 @@ def test_transformed_is_irsims_geometry_transform_of_irsims_shapes():
         else:
             handler, ours = make("circle", radius=radius, center=[cx, cy]), g.circle_outline(radius, cx, cy)
         assert_same_ring(ours, ring_of(handler._original_geometry), f"circle {k}")
-        assert_same_ring(g.transformed(ours, x, y, theta), ring_of(handler.step(np.array([[x], [y], [theta]]))), f"circle {k} moved")
+        assert_same_ring(transformed(ours, x, y, theta), ring_of(handler.step(np.array([[x], [y], [theta]]))), f"circle {k} moved")
     for k, ((length, width, wheelbase), (x, y, theta)) in enumerate(zip(rectangles(600, seed=14), states(600, seed=15))):
         handler = make("rectangle", length=length, width=width, wheelbase=wheelbase)
         ours = our_rectangle(length, width, wheelbase)
         assert_same_ring(ours, ring_of(handler._original_geometry), f"rectangle {k}")
         moved = util.geometry_transform(handler._original_geometry, np.array([x, y, theta]))
-        assert_same_ring(g.transformed(ours, x, y, theta), ring_of(moved), f"rectangle {k} moved")
+        assert_same_ring(transformed(ours, x, y, theta), ring_of(moved), f"rectangle {k} moved")
 
 
 WORLD = """\
@@ -230,7 +236,6 @@ def test_compiled_functions_give_the_python_bits():
         "circle_outline_origin": numba.njit(lambda r: g.circle_outline(r)),
         "rectangle_outline": numba.njit(lambda length, width: g.rectangle_outline(length, width)),
         "rectangle_outline_wheelbase": numba.njit(lambda length, width, wb: g.rectangle_outline(length, width, wb)),
-        "transformed": numba.njit(lambda ring, x, y, theta: g.transformed(ring, x, y, theta)),
         "centroid": numba.njit(lambda ring: g.centroid(ring)),
         "centroid_placed": numba.njit(lambda ring, x, y, theta: g.centroid(ring, x, y, theta)),
         "bounding_radius": numba.njit(lambda ring: g.bounding_radius(ring)),
@@ -240,13 +245,12 @@ def test_compiled_functions_give_the_python_bits():
     for (radius, cx, cy), (length, width, wheelbase), (x, y, theta) in zip(circles(150, 16), rectangles(150, 17), states(150, 18)):
         wb = 0.0 if wheelbase is None else wheelbase
         circle, rectangle = g.circle_outline(radius, cx, cy), g.rectangle_outline(length, width, wb)
-        moved = g.transformed(circle, x, y, theta)
+        moved = transformed(circle, x, y, theta)
         assert_same_ring(kernels["circle_outline"](radius, cx, cy), circle, "circle_outline")
         assert_same_ring(kernels["circle_outline_origin"](radius), g.circle_outline(radius), "circle_outline at the origin")
         assert_same_ring(kernels["rectangle_outline"](length, width), g.rectangle_outline(length, width), "rectangle_outline")
         assert_same_ring(kernels["rectangle_outline_wheelbase"](length, width, wb), rectangle, "rectangle_outline")
-        assert_same_ring(kernels["transformed"](circle, x, y, theta), moved, "transformed")
-        for ring in (circle, moved, rectangle, g.transformed(rectangle, x, y, theta)):
+        for ring in (circle, moved, rectangle, transformed(rectangle, x, y, theta)):
             assert kernels["centroid"](ring) == g.centroid(ring)
             assert kernels["centroid_placed"](ring, x, y, theta) == g.centroid(ring, x, y, theta)
             assert kernels["bounding_radius"](ring) == g.bounding_radius(ring)

@@ -194,8 +194,8 @@ def test_a_deep_copy_of_a_step_info_is_equal_and_independent():
     from common.scenario import Scenario
 
     # stable-baselines3's DummyVecEnv deep-copies every info every step, after adding the episode's
-    # last observation to it: the info's own deep copy (the generic one cost a sixth of PPO's
-    # training) must still copy what can change.
+    # last observation to it: the info's own deep copy (cheaper than the generic one) must still
+    # copy what can change.
     env = _flat_env(Scenario(start=(2.0, 2.0, 0.0), goal=(8.0, 8.0)), observation="nav7")
     env.reset(seed=0)
     info = env.step(STAND_STILL)[4]

@@ -68,8 +68,8 @@ class NavActorCriticPolicy(ActorCriticPolicy):
 
 
 class DeterministicAction:
-    """``policy.predict(observation, deterministic=True)[0]`` for one observation at a time, in half
-    the time: the same network calls and the same clipping or unscaling of the action, without
+    """``policy.predict(observation, deterministic=True)[0]`` for one observation at a time, in about
+    two thirds of the time (the main job's policy: 98 µs a call against 148): the same network calls and the same clipping or unscaling of the action, without
     stable-baselines3's per-call bookkeeping (every module switched to evaluation mode again, the
     observation's shape checks). A policy in training mode, or an observation of another shape,
     goes through ``predict`` itself."""

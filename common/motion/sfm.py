@@ -18,7 +18,6 @@ import math
 import numpy as np
 
 from common.kernel_cache import uncounted
-
 from common.motion.steering import c_pow
 
 # The parameter vector :func:`social_force_velocity` reads, by index (names as IR-SIM's).

@@ -8,8 +8,9 @@ in Python) and moves (:func:`move`); then every mover is judged (:func:`settle`)
 pops its goal queue, and contact, which stops it where the collision mode says.
 :func:`finish_step` is the one compiled call a step makes after the robot's own move, the next
 step's plans included (a call costs microseconds; a crowd's step, tens of them). The other
-functions are plain Python where called from Python (``register_jitable``), so the slow path and
-the compiled one compute the same bits.
+functions are plain Python where called from Python (``register_jitable``, most of them
+``uncounted``: compiled without reference counting, so they allocate nothing), so the slow path
+and the compiled one compute the same bits.
 """
 
 from __future__ import annotations
