@@ -48,6 +48,17 @@ def test_validate_accepts_a_good_file_and_missing_files_fail(tmp_path, capsys):
     assert "no such file" in capsys.readouterr().err
 
 
+def test_validate_answers_every_file_and_fails_if_any_is_bad(tmp_path, capsys):
+    good, bad, missing = tmp_path / "good.yaml", tmp_path / "bad.yaml", tmp_path / "missing.yaml"
+    good.write_text(GOOD)
+    bad.write_text(BAD_FILES["negative radius"][0])
+    assert main(["validate", str(bad), str(good), str(missing), str(good)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out.splitlines() == [f"ok: {good}: scenario 'good', 0 obstacles"] * 2
+    errors = captured.err.splitlines()
+    assert len(errors) == 2 and str(bad) in errors[0] and str(missing) in errors[1] and "no such file" in errors[1]
+
+
 def test_cli_process_exits_2_without_traceback(tmp_path):
     path = tmp_path / "bad.yaml"
     path.write_text("obstacles:\n  - {type: circle, x: 5, y: 5, radius: -1}\n")

@@ -21,23 +21,33 @@ EXIT_BAD_INPUT = 2
 
 
 def _validate(args: argparse.Namespace) -> int:
+    """Every file is answered, a bad one in its own error line; exit 2 if any was bad."""
+    bad = 0
+    for path in args.files:
+        try:
+            print(_validated(path))
+        except (ConfigError, OSError) as error:
+            print(_error_line(error), file=sys.stderr)
+            bad += 1
+    return EXIT_BAD_INPUT if bad else 0
+
+
+def _validated(path: str) -> str:
+    """The ``ok:`` line of a valid curriculum, scenario or IR-SIM world file (its warnings on stderr)."""
     from common.curriculum.schema import curriculum_from_mapping, is_curriculum
     from common.world_file import WorldFile
     from common.yaml_io import read_yaml_mapping
 
-    for path in args.files:
-        data = read_yaml_mapping(path)
-        if is_curriculum(data):
-            config = curriculum_from_mapping(data, path)
-            print(f"ok: {path}: curriculum {config.name!r}, {len(config.stages)} stages")
-            continue
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", ScenarioWarning)
-            scenario = WorldFile(path).initial
-        for warning in caught:
-            print(f"warning: {warning.message}", file=sys.stderr)
-        print(f"ok: {path}: scenario {scenario.name!r}, {len(scenario.obstacles)} obstacles")
-    return 0
+    data = read_yaml_mapping(path)
+    if is_curriculum(data):
+        config = curriculum_from_mapping(data, path)
+        return f"ok: {path}: curriculum {config.name!r}, {len(config.stages)} stages"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ScenarioWarning)
+        scenario = WorldFile(path).initial
+    for warning in caught:
+        print(f"warning: {warning.message}", file=sys.stderr)
+    return f"ok: {path}: scenario {scenario.name!r}, {len(scenario.obstacles)} obstacles"
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -519,15 +529,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.handler(args)
-    except ConfigError as error:
-        print(f"error: {error}", file=sys.stderr)
+    except (ConfigError, OSError) as error:
+        print(_error_line(error), file=sys.stderr)
         return EXIT_BAD_INPUT
-    except OSError as error:
-        # The file system refused (a file where a directory should be, no permission, a full
-        # disk): the user's to fix, in one line. A run stopped so is resumable from its last checkpoint.
-        where = f"{error.filename}: " if error.filename else ""
-        print(f"error: {where}{error.strerror or error}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+
+
+def _error_line(error: ConfigError | OSError) -> str:
+    """Bad input as one line. An OSError is the file system refusing (a file where a directory
+    should be, no permission, a full disk): the user's to fix; a run stopped so is resumable
+    from its last checkpoint."""
+    if isinstance(error, ConfigError):
+        return f"error: {error}"
+    where = f"{error.filename}: " if error.filename else ""
+    return f"error: {where}{error.strerror or error}"
 
 
 if __name__ == "__main__":

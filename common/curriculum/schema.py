@@ -36,7 +36,6 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from common.actions import MAPPINGS
 from common.conditions import CONDITION_KEYS, ONLY_2D, ONLY_3D, conditions_of
 from common.curriculum.hyperparams import policy_kwargs_from_yaml, resolve_hyperparams
-from common.curriculum.policy import algorithm_class
 from common.curriculum.policy_file import ALGORITHMS
 from common.drive import refuse_other_drives
 from common.errors import ConfigError, quote
@@ -187,6 +186,8 @@ def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
         resolve_reward_spec(stage.reward)
     except ConfigError as error:
         raise ConfigError(source, f"{field}.{error.field}", error.problem) from None
+    from common.curriculum.policy import algorithm_class  # torch and stable-baselines3: seconds, for curricula only
+
     allowed = set(inspect.signature(algorithm_class(stage.algorithm).__init__).parameters) - _MANAGED - {"self"}
     for key in stage.hyperparams:
         if key not in allowed:
