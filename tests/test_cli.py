@@ -192,6 +192,32 @@ def test_render_writes_a_gif_and_the_drift_plot(tmp_path, capsys):
            "conditions: odometry_noise=0.05, action_delay=0, dynamics=kinematic" in printed.err
 
 
+@pytest.mark.parametrize("flag, name", [("--drift", "d.txt"), ("--drift", "plots"), ("--out", "e.png"), ("--gif", "f.yaml")])
+def test_an_output_of_the_wrong_kind_is_refused_before_any_episode_runs(flag, name, tmp_path, capsys, monkeypatch):
+    import common.evaluation
+
+    (tmp_path / "plots").mkdir()
+    (tmp_path / "f.yaml").write_text("x: 1\n")
+    monkeypatch.setattr(common.evaluation, "run_episode", lambda *args, **kwargs: pytest.fail("an episode ran"))
+    monkeypatch.setattr("flatland.render.record_agent", lambda *args, **kwargs: pytest.fail("an episode ran"))
+    outputs = {"--out": str(tmp_path / "e.gif"), flag: str(tmp_path / name)}
+    command = ["compare", "--controllers", "go_to_goal", "--episodes", "1"] if flag == "--gif" else ["render"]
+    argv = command + [part for pair in outputs.items() for part in pair]
+    if flag == "--gif":
+        argv[argv.index("--out") + 1] = str(tmp_path / "cmp")
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{flag} names" in err and str(tmp_path / name) in err, err
+    assert not (tmp_path / "cmp").exists()
+
+
+def test_render_makes_the_drift_plots_folder(tmp_path, capsys):
+    drift = tmp_path / "new" / "d.png"
+    assert main(["render", "--agent", "go_to_goal", "--out", str(tmp_path / "e.gif"), "--max-steps", "3",
+                 "--drift", str(drift)]) == 0
+    assert drift.stat().st_size > 1000 and f"{drift}: odometry drift" in capsys.readouterr().out
+
+
 @pytest.mark.parametrize("argv, expected", [
     (["render", "--index", "-1"], "argument --index: must be from 0"),
     (["eval", "--policy", "p.zip", "--seed", "-1"], "argument --seed: must be from 0"),

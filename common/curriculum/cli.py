@@ -255,6 +255,9 @@ def _agent(spec: str):
 def _compare(args: argparse.Namespace) -> int:
     from rich.progress import Progress
 
+    if args.gif and Path(args.gif).exists() and not Path(args.gif).is_dir():
+        raise ConfigError(args.gif, None, "--gif names a directory for the GIFs (one per agent), not a file")
+
     policies = _policies(args.policy)
     _settle(args, policies)
     scenarios = _scenarios(args)  # a bad file is refused before the controllers and worlds load (seconds)
@@ -346,12 +349,19 @@ def _record(agent, scenario, args: argparse.Namespace, gif: Path, radius: float 
                         conditions=_conditions(args, [agent]), goal_radius=radius)
 
 
+def _output_file(name: str, flag: str, what: str, suffix: str) -> Path:
+    """``flag``'s file to write, checked before any episode runs."""
+    path = Path(name)
+    if path.is_dir() or path.suffix.lower() != suffix:
+        raise ConfigError(path, None, f"{flag} names {what} (FILE{suffix}), not a directory or another kind of file")
+    return path
+
+
 def _render(args: argparse.Namespace) -> int:
     from flatland.render import plot_odometry_drift
 
-    gif = Path(args.out)
-    if gif.is_dir() or gif.suffix.lower() != ".gif":
-        raise ConfigError(gif, None, "--out names the GIF to write (FILE.gif), not a directory or another kind of file")
+    gif = _output_file(args.out, "--out", "the GIF to write", ".gif")
+    drift = _output_file(args.drift, "--drift", "the plot to write", ".png") if args.drift else None
     agent = _agent(args.agent)
     _settle(args, [agent])
     radius, conditions = _judged(args, [agent]), _conditions(args, [agent])
@@ -361,10 +371,11 @@ def _render(args: argparse.Namespace) -> int:
     gif, episode, true_path, estimate = _record(agent, scenario, args, gif, radius, args.every)
     print(f"{gif}: {agent.name} on {scenario.name}: {episode.outcome} after {episode.steps} steps, "
           f"{episode.path_length:.2f} m")
-    if args.drift:
-        plot_odometry_drift(scenario, true_path, estimate, args.drift)
+    if drift:
+        drift.parent.mkdir(parents=True, exist_ok=True)
+        plot_odometry_drift(scenario, true_path, estimate, drift)
         error = float(np.hypot(*(np.asarray(true_path[-1]) - np.asarray(estimate[-1]))))
-        print(f"{args.drift}: odometry drift {error:.3f} m after {episode.path_length:.2f} m "
+        print(f"{drift}: odometry drift {error:.3f} m after {episode.path_length:.2f} m "
               f"(encoder noise {scenario.robot.encoder_noise})")
     return 0
 
