@@ -138,7 +138,16 @@ class Conditions(BaseModel):
             try:
                 robot_profile(value)
             except ConfigError as error:
-                raise ValueError(error.problem) from None
+                inner = error.field.removeprefix("robot").removeprefix(".")
+                raise ValueError(f"{inner}: {error.problem}" if inner else error.problem) from None
+        return value
+
+    @field_validator("motor_scale", "friction", "mass_scale", mode="before")
+    @classmethod
+    def _a_range(cls, value: Any) -> Any:
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            raise ValueError(f"expected a range [low, high] drawn per episode, got {value!r}; "
+                             f"for a fixed value: [{value!r}, {value!r}]")
         return value
 
     @field_validator("motor_scale", "friction", "mass_scale", "action_delay")
@@ -156,7 +165,7 @@ class Conditions(BaseModel):
         try:
             return cls.model_validate(values)
         except ValidationError as exc:
-            error = pydantic_error(None, exc)
+            error = pydantic_error(None, exc, cls)
             raise ConfigError(source, f"{field}.{error.field}" if error.field else field, error.problem) from None
 
     def for_tier(self, tier: str, strict: bool = True) -> "Conditions":

@@ -43,7 +43,7 @@ def robot_profile(value: str | dict[str, Any] | RobotProfile, field: str = "robo
         try:
             return RobotProfile.model_validate(value)
         except ValidationError as exc:
-            error = pydantic_error(None, exc)
+            error = pydantic_error(None, exc, RobotProfile)
             raise ConfigError(None, f"{field}.{error.field}" if error.field else field, error.problem) from None
     raise ConfigError(None, field, f"got {quote(value)}; allowed: a robot name ({', '.join(PROFILES)}) or a mapping")
 

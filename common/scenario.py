@@ -16,11 +16,12 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated, Any, Literal, Union
+import typing
+from typing import Annotated, Any, Literal, Sequence, Union
 
 import numpy as np
 import yaml
-from pydantic import Field, ValidationError, model_validator
+from pydantic import BaseModel, Field, ValidationError, model_validator
 
 from common import geometry
 from common.errors import ConfigError, quote
@@ -554,14 +555,40 @@ class Scenario(Frozen):
         return yaml.safe_dump(self.model_dump(mode="json"), sort_keys=False)
 
 
-def pydantic_error(source: str | Path | None, error: ValidationError) -> ConfigError:
-    """The first problem of a pydantic error as a one-line :class:`ConfigError`."""
+def _models_in(annotation: Any) -> list[type[BaseModel]]:
+    """The models an annotation holds: itself, an Optional's, a union's members, a list's items."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return [annotation]
+    return [model for arg in typing.get_args(annotation) for model in _models_in(arg)]
+
+
+def allowed_keys(model: type[BaseModel], loc: Sequence[Any]) -> list[str] | None:
+    """The keys allowed beside the unknown key at ``loc`` (a pydantic error's path from ``model``);
+    None where the path leaves the models (a union member pydantic names by its tag, say)."""
+    models = [model]
+    for part in loc[:-1]:
+        if isinstance(part, int):
+            continue  # a list's item: its models are already the field's
+        held = [m.model_fields[part].annotation for m in models if part in m.model_fields]
+        if held:
+            models = [inner for annotation in held for inner in _models_in(annotation)]
+        else:  # a tagged union's member: the one whose type field is that tag
+            models = [m for m in models if "type" in m.model_fields and m.model_fields["type"].default == part]
+        if not models:
+            return None
+    return sorted({key for m in models for key in m.model_fields}) if len(models) == 1 else None
+
+
+def pydantic_error(source: str | Path | None, error: ValidationError, model: type[BaseModel] | None = None) -> ConfigError:
+    """The first problem of a pydantic error as a one-line :class:`ConfigError`; an unknown key of
+    ``model`` (the model validated) also lists the keys allowed there."""
     first = error.errors()[0]
     # Union members add tags such as "list[constrained-int]" to the path: they name no field.
     field = ".".join(str(part) for part in first["loc"] if "[" not in str(part)) or None
     message = first["msg"]
     if first["type"] == "extra_forbidden":
-        message = "unknown key"
+        allowed = allowed_keys(model, [part for part in first["loc"] if "[" not in str(part)]) if model else None
+        message = "unknown key" + (f"; allowed: {', '.join(allowed)}" if allowed else "")
     elif first["type"] == "value_error":
         message = message.removeprefix("Value error, ")  # our validators' messages say what they got
     elif "input" in first:
@@ -574,7 +601,7 @@ def scenario_from_mapping(data: dict, source: str | Path | None = None) -> Scena
     try:
         scenario = Scenario.model_validate(data)
     except ValidationError as exc:
-        raise pydantic_error(source, exc) from None
+        raise pydantic_error(source, exc, Scenario) from None
     grid = scenario.grid_map
     if grid is not None:
         if grid.image is not None and source is not None and not Path(grid.image).is_absolute():

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from common.errors import ScenarioWarning
+from common.errors import ConfigError, ScenarioWarning
 from common.scenario import Scenario, scenario_from_mapping
 from common.yaml_io import read_yaml_mapping
 
@@ -48,6 +48,9 @@ class WorldFile:
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         self.data = read_yaml_mapping(self.path)
+        if "stages" in self.data:  # a curriculum's mark (common.curriculum.schema.is_curriculum)
+            raise ConfigError(self.path, None, "is a curriculum (it has stages), not a scenario or an IR-SIM world file; "
+                              "run it with: curriculum run FILE")
         self.irsim = is_irsim(self.data)
         if self.irsim:
             from common.irsim_format import ReadCache, has_random_placement

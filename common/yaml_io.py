@@ -177,6 +177,10 @@ def parse_yaml(text: str, source: str | Path | None = None) -> Any:
         # libyaml's scanner, reading ahead, may meet its own nesting limit (1000) before the composer meets ours.
         deep = "nesting depth" in str(getattr(exc, "problem", ""))
         problem = f"nested deeper than {MAX_DEPTH} levels; refused" if deep else "not valid YAML"
+        if isinstance(exc, yaml.constructor.ConstructorError) and "for the tag " in str(exc.problem):
+            # A tag asks the reader to build an object (python/object, say): plain YAML only, nothing runs.
+            tag = str(exc.problem).split("for the tag ", 1)[1].replace("tag:yaml.org,2002:", "!!")
+            problem = f"the tag {tag} is refused; allowed: plain YAML (no tags)"
         raise ConfigError(source, f"line {mark.line + 1}" if mark is not None else None, problem) from None
     finally:
         loader.dispose()

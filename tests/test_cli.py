@@ -16,7 +16,11 @@ from common.scenario import Scenario
 GOOD = Scenario(name="good").to_yaml()
 
 BAD_FILES = {
-    "unknown key": ("name: x\nwheels: 3\n", "wheels: unknown key"),
+    "unknown key": ("name: x\nwheels: 3\n", "wheels: unknown key; allowed: difficulty, goal, goal_threshold, grid_map"),
+    "unknown key of an obstacle": ("obstacles:\n  - {type: circle, x: 5, y: 5, radius: 1, colour: red}\n",
+                                   "obstacles.0.circle.colour: unknown key; allowed: height, motion, radius, type"),
+    "a tag that builds an object": ("!!python/object:os.system\nx: 1\n",
+                                    "line 1: the tag '!!python/object:os.system' is refused; allowed: plain YAML"),
     "wrong type": ("world:\n  width: wide\n", "world.width: Input should be a valid number"),
     "negative radius": ("obstacles:\n  - {type: circle, x: 5, y: 5, radius: -1}\n", "obstacles.0.circle.radius: Input should be greater than 0"),
     "unknown obstacle type": ("obstacles:\n  - {type: blob, x: 5, y: 5}\n", "obstacles.0"),
@@ -57,6 +61,14 @@ def test_validate_answers_every_file_and_fails_if_any_is_bad(tmp_path, capsys):
     assert captured.out.splitlines() == [f"ok: {good}: scenario 'good', 0 obstacles"] * 2
     errors = captured.err.splitlines()
     assert len(errors) == 2 and str(bad) in errors[0] and str(missing) in errors[1] and "no such file" in errors[1]
+
+
+def test_a_curriculum_given_as_a_scenario_file_is_named_for_what_it_is(tmp_path, capsys):
+    curriculum = tmp_path / "c.yaml"
+    curriculum.write_text("name: c\nstages: []\n")
+    assert main(["compare", "--controllers", "go_to_goal", "--episodes", "1", "--scenario-file", str(curriculum)]) == 2
+    assert capsys.readouterr().err == f"error: {curriculum}: is a curriculum (it has stages), not a scenario or an " \
+                                      "IR-SIM world file; run it with: curriculum run FILE\n"
 
 
 def test_cli_process_exits_2_without_traceback(tmp_path):
@@ -224,6 +236,8 @@ def test_render_makes_the_drift_plots_folder(tmp_path, capsys):
     (["bench", "--steps", "0"], "argument --steps: must be from 100"),
     (["render", "--env-kwargs", "odometry_noise:nan"], "--env-kwargs.odometry_noise: Input should be a finite number"),
     (["render", "--env-kwargs", "odometry_noise:-1"], "--env-kwargs.odometry_noise: Input should be greater than or equal to 0"),
+    (["render", "--env-kwargs", "robot:{colour: 1}"], "--env-kwargs.robot: colour: unknown key; allowed: accel_lateral"),
+    (["render", "--env-kwargs", "motor_scale:1.2"], "motor_scale: expected a range [low, high] drawn per episode, got 1.2"),
     (["render", "--episodes", "3"], "unrecognized arguments: --episodes 3"),
     (["compare", "--controllers", ",,,"], "--controllers: no controller named in ',,,'"),
     (["compare", "--max-steps", "0"], "argument --max-steps: must be from 1"),
