@@ -177,7 +177,7 @@ class Conditions(BaseModel):
         for knob in wrong:
             if knob in given and strict:
                 allowed = ", ".join(k for k in Conditions.model_fields if k not in wrong)
-                raise ConfigError(None, knob, f"not a {tier} knob; allowed: {allowed}")
+                raise ConfigError(None, knob, f"not {'an' if tier == 'irsim' else 'a'} {tier} knob; allowed: {allowed}")
             given.pop(knob, None)
         return Conditions.model_validate({**TIER_DEFAULTS[tier], **given})
 

@@ -200,7 +200,7 @@ def test_render_writes_a_gif_and_the_drift_plot(tmp_path, capsys):
         assert image.n_frames > 3
     printed = capsys.readouterr()
     assert drift.stat().st_size > 1000 and "(encoder noise 0.05)" in printed.out
-    assert "astar_pursuit: flatland, suite sparse, 1 episodes from seed 0, judged within each scenario's goal radius; " \
+    assert "astar_pursuit: flatland, suite sparse, 1 episode from seed 0, judged within each scenario's goal radius; " \
            "conditions: odometry_noise=0.05, action_delay=0, dynamics=kinematic" in printed.err
 
 

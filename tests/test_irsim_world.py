@@ -91,11 +91,11 @@ def test_what_irsim_cannot_model_is_refused_in_one_line(capsys, monkeypatch):
     from common.curriculum import irsim_world
     from common.curriculum.cli import main
 
-    with pytest.raises(ConfigError, match="action_delay: not a irsim knob"):
+    with pytest.raises(ConfigError, match="action_delay: not an irsim knob"):
         Conditions(action_delay=2).for_tier("irsim")
     assert main(["compare", "--world", "irsim", "--controllers", "reactive", "--episodes", "1",
                  "--env-kwargs", "dynamics:first_order"]) == 2
-    assert "--env-kwargs.dynamics: not a irsim knob" in capsys.readouterr().err
+    assert "--env-kwargs.dynamics: not an irsim knob" in capsys.readouterr().err
     with pytest.raises(ConfigError, match="IR-SIM's ORCA group sees only its members"):
         make_world("irsim", generate("crowd", 0, split="eval"))
     monkeypatch.setattr(irsim_world, "import_irsim", lambda: None)
@@ -131,3 +131,17 @@ def test_the_agreement_table_pairs_the_episodes_of_both_worlds(capsys):
     assert main(["--episodes", "2", "--suites", "sparse", "--policy", policy]) == 0
     row = capsys.readouterr().out.strip().splitlines()[-1]
     assert row.startswith("| stage1_2d_ppo | sparse | ") and row.count("|") == 8
+
+
+def test_importing_irsim_prints_nothing():
+    """IR-SIM tries the GUI backends on import and prints a line for each that fails headless;
+    none of it reaches the user's output (a fresh process: an imported module prints no more)."""
+    import os
+    import subprocess
+    import sys
+
+    optional("irsim")
+    result = subprocess.run([sys.executable, "-c", "from common.curriculum.irsim_world import import_irsim; "
+                             "assert import_irsim() is not None"], capture_output=True, text=True, cwd=ROOT,
+                            env={k: v for k, v in os.environ.items() if k != "DISPLAY"})
+    assert result.returncode == 0 and result.stdout == "" and result.stderr == "", result

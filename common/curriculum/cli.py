@@ -205,12 +205,16 @@ def _settle(args: argparse.Namespace, agents) -> None:
         args.episodes = episodes if args.episodes is None else args.episodes
 
 
+def _episodes(count: int) -> str:
+    return f"{count} episode" if count == 1 else f"{count} episodes"
+
+
 def _announce(args: argparse.Namespace, agents: str, episodes: int, radius: float | None, conditions) -> None:
     """Say on stderr what the agents are measured on, so a figure can be told apart and re-run."""
     source = args.scenario_file or f"suite {args.suite}"
     judged = f"within {radius:g} m of the goal" if radius is not None else "within each scenario's goal radius"
     knobs = ", ".join(f"{k}={v}" for k, v in conditions.for_tier(args.world).given().items()) or "ideal"
-    print(f"{agents}: {args.world}, {source}, {episodes} episodes from seed {args.seed}, judged {judged}; "
+    print(f"{agents}: {args.world}, {source}, {_episodes(episodes)} from seed {args.seed}, judged {judged}; "
           f"conditions: {knobs}", file=sys.stderr)
 
 
@@ -276,7 +280,7 @@ def _compare(args: argparse.Namespace) -> int:
         summaries = evaluate(agents, scenarios, args.world, seed=args.seed, max_steps=args.max_steps,
                              conditions=conditions, goal_radius=radius, progress=lambda n: bar.advance(task, n))
     judged = f"{radius:g} m" if radius is not None else "each scenario's radius"
-    title = f"{args.world} / {source}: {len(scenarios)} episodes from seed {args.seed}, judged within {judged}"
+    title = f"{args.world} / {source}: {_episodes(len(scenarios))} from seed {args.seed}, judged within {judged}"
     table = markdown_table(summaries, title)
     (out / "comparison.md").write_text(table)
     write_csv(summaries, out / "episodes.csv")
@@ -492,7 +496,8 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument("--policy", nargs="+", required=True, metavar="ZIP|ONNX")
     _add_scenario_source(evaluate, episodes=100)
     evaluate.add_argument("--json", action="store_true",
-                          help="print {success_rate, collision_rate, timeout_rate, spl, mean_steps, mean_path_length, episodes}")
+                          help="print one JSON object per policy: success_rate, collision_rate, timeout_rate, stuck_rate, "
+                               "spl, mean_steps, mean_path_length, episodes, success_ci95 (and social, among movers)")
     evaluate.set_defaults(handler=_eval)
 
     validate = commands.add_parser("validate", help="check curriculum, scenario or IR-SIM world YAML files")

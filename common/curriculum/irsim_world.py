@@ -13,6 +13,8 @@ model (delays, wheel dynamics, odometry noise, the 3D knobs) are refused for thi
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
 import tempfile
 from pathlib import Path
@@ -34,7 +36,9 @@ def import_irsim():
     """IR-SIM (headless: matplotlib's Agg backend), or None where it is not installed."""
     os.environ.setdefault("MPLBACKEND", "Agg")
     try:
-        with stdout_to_stderr():
+        # On import IR-SIM tries the GUI backends (TkAgg, Qt5Agg) whatever MPLBACKEND says, and prints
+        # a line for each that fails: noise on every headless run, kept from the user's output.
+        with contextlib.redirect_stdout(io.StringIO()):
             import irsim
     except ImportError:
         return None
