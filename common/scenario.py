@@ -421,6 +421,10 @@ class WorldSpec(Frozen):
         return math.hypot(self.width, self.height)
 
 
+MOVERS_ON_GRID = ("movers on a grid map are not modelled (they would not see it); allowed: a grid map without "
+                  "movers, or movers among shapes")
+
+
 class Scenario(Frozen):
     """Everything a tier needs to build a world: robot, sensors, world, start, goal, obstacles.
 
@@ -451,6 +455,8 @@ class Scenario(Frozen):
         movers = [(i, o.motion) for i, o in enumerate(self.obstacles) if getattr(o, "motion", None) is not None]
         if len(movers) > MAX_MOVERS:
             raise ValueError(f"{len(movers):,} moving obstacles; allowed: at most {MAX_MOVERS}")
+        if movers and self.grid_map is not None:
+            raise ValueError(f"grid_map: {MOVERS_ON_GRID}")
         groups: dict[str, Motion] = {}
         for index, motion in movers + ([(-1, self.robot_motion)] if self.robot_motion is not None else []):
             where = "robot_motion" if index < 0 else f"obstacles.{index}.{self.obstacles[index].type}.motion"

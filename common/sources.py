@@ -42,6 +42,10 @@ class ListSource:
     def __init__(self, scenarios: Sequence[Scenario]) -> None:
         if not scenarios:
             raise ConfigError(None, "world", "an empty list of scenarios")
+        for index, scenario in enumerate(scenarios):
+            if not isinstance(scenario, Scenario):
+                raise ConfigError(None, f"world.{index}", f"got {quote(scenario)}; allowed: a list of Scenario objects "
+                                  "(several kinds: a mix such as {'sparse': 1, 'cluttered': 1})")
         self.scenarios = list(scenarios)
 
     def draw(self, rng: np.random.Generator, resample: bool = False) -> Scenario:

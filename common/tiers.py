@@ -26,6 +26,8 @@ _WORLDS = {"flatland": "flatland.world:World", "physics3d": "physics3d.world:Wor
 # What each tier's generator kinds draw scenarios around (flatland: the defaults of Scenario).
 _TEMPLATES = {"flatland": "common.scenario:Scenario", "physics3d": "physics3d.robot:TEMPLATE",
               "irsim": "common.scenario:Scenario"}
+# What a tier refuses to build, checked without building it (flatland builds every valid scenario).
+_REFUSALS = {"physics3d": "physics3d.world:refuse_unmodelled"}
 TIERS = ("flatland", "physics3d")  # the tiers this project trains in
 # Where agents are evaluated: the tiers, and IR-SIM itself (an optional extra), run with the same
 # scenarios and metrics to tell navigation learnt from flatland learnt.
@@ -53,3 +55,9 @@ def generator_template(tier: str) -> Scenario:
     """The robot, lidar and world a tier's generator kinds draw scenarios around."""
     template = _load(tier, _TEMPLATES)
     return template() if isinstance(template, type) else template
+
+
+def refuse_unbuildable(tier: str, scenario: Scenario) -> None:
+    """A one-line error for what ``tier`` cannot build of ``scenario``, found without building it."""
+    if tier in _REFUSALS:
+        _load(tier, _REFUSALS)(scenario)

@@ -18,6 +18,7 @@ import yaml
 from common.curriculum.cli import main
 from common.curriculum.schema import curriculum_from_mapping, load_curriculum
 from common.errors import ConfigError
+from common.generators import generate
 
 TINY = Path(__file__).parent / "data" / "tiny_curriculum.yaml"
 ROOT = Path(__file__).resolve().parents[1]
@@ -59,6 +60,41 @@ def test_schema_errors_name_the_field_and_what_is_allowed(data, field, message):
     with pytest.raises(ConfigError) as error:
         curriculum_from_mapping(data, "c.yaml")
     assert str(error.value).startswith(f"c.yaml: {field}: ") and message in str(error.value), str(error.value)
+
+
+@pytest.mark.parametrize("world, scenarios, file, message", [
+    ("flatland", None, "robot: {kinematics: omni}\n",
+     "stages.0.scenarios: scenario: robot.kinematics: a curriculum stage drives a differential drive (v, w), not 'omni'"),
+    ("physics3d", {"kind": "maze"}, None,
+     "stages.0.scenarios: maze-train-0: grid_map: an occupancy grid map is not built in the 3D tier"),
+    ("physics3d", None, "grid_map: {image: map.png}\n",
+     "stages.0.scenarios: scenario: grid_map: an occupancy grid map is not built in the 3D tier"),
+    ("physics3d", {"mix": {"sparse": 1, "maze": 1}}, None, "maze-train-0: grid_map: an occupancy grid map is not built"),
+])
+def test_a_stage_whose_worlds_its_tier_or_its_policy_cannot_drive_is_refused(world, scenarios, file, message, tmp_path):
+    """The worlds a stage's env would draw are checked as it validates, not when training starts."""
+    from PIL import Image
+
+    Image.new("L", (20, 20), 255).save(tmp_path / "map.png")
+    if file is not None:
+        (tmp_path / "world.yaml").write_text(file)
+        scenarios = {"file": "world.yaml"}
+    data = _with({}, {"world": world, "scenarios": scenarios, "normalize": False, "observation": "lidar43"})
+    path = tmp_path / "c.yaml"
+    with pytest.raises(ConfigError) as error:
+        curriculum_from_mapping(data, path)
+    assert str(error.value).startswith(f"{path}: ") and message in str(error.value) and "\n" not in str(error.value), \
+        str(error.value)
+
+
+def test_movers_on_a_grid_map_are_refused_as_the_scenario_is_read():
+    from common.scenario import scenario_from_mapping
+
+    data = generate("maze", 0).model_dump(mode="json")
+    data["obstacles"] = [{"type": "circle", "x": 1.0, "y": 1.0, "radius": 0.2,
+                          "motion": {"behavior": {"name": "dash"}, "goals": [[2.0, 2.0]]}}]
+    with pytest.raises(ConfigError, match="grid_map: movers on a grid map are not modelled"):
+        scenario_from_mapping(data)
 
 
 def test_shipped_curricula_validate(capsys):

@@ -95,6 +95,16 @@ def test_world_argument_accepts_a_yaml_path(tmp_path):
     assert env.unwrapped.scenario.name == "from-file"
 
 
+@pytest.mark.parametrize("tier", ["flatland/Nav-v0", "physics3d/WarehouseNav-v0"])
+def test_a_list_of_anything_but_scenarios_is_one_line_naming_its_item(tier):
+    import physics3d  # noqa: F401
+    from common.errors import ConfigError
+
+    with pytest.raises(ConfigError) as error:
+        gym.make(tier, world=[Scenario(), "cluttered"])
+    assert str(error.value).startswith("world.1: got 'cluttered'; allowed: a list of Scenario objects")
+
+
 def test_rgb_array_frames_and_gif(tmp_path):
     from flatland.render import record_episode
 

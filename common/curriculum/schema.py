@@ -170,6 +170,31 @@ def _check_env_kwargs(stage: StageSpec, source: str | Path, field: str) -> None:
         raise ConfigError(source, f"{field}.resample", f"got {quote(stage.env_kwargs['resample'])}; allowed: true or false")
 
 
+def _check_worlds(stage: StageSpec, source: str | Path, field: str) -> None:
+    """The stage's worlds as its env draws them (its file's, or one of each kind or its suite's
+    first), under its conditions: each must be buildable in its tier, and a differential drive
+    (a stage's policy file holds a (v, w) actor), whichever the robot came from."""
+    from common.generators import generate
+    from common.tiers import refuse_unbuildable
+    from common.world_file import WorldFile
+
+    spec, template = stage.scenarios, generator_template(stage.world)
+    if spec.file is not None:
+        worlds = [WorldFile(spec.file).initial]
+    elif spec.suite is not None:
+        worlds = [next(SUITES[spec.suite].scenarios(count=1, template=template))]
+    else:
+        worlds = [generate(kind, 0, spec.difficulty, "train", template) for kind in ([spec.kind] if spec.kind else spec.mix)]
+    conditions = conditions_of(stage.env_kwargs, source, field).for_tier(stage.world)
+    for world in worlds:
+        try:
+            world = conditions.scenario(world)
+            refuse_other_drives(world.robot, "a curriculum stage")
+            refuse_unbuildable(stage.world, world)
+        except ConfigError as error:
+            raise ConfigError(source, f"{field}.scenarios", f"{world.name}: {error.field}: {error.problem}") from None
+
+
 def _check_robot_fits(stage: StageSpec, robot: RobotProfile) -> None:
     """A robot too wide for the stage's generator kinds finds no layout: the env's scenario source
     tries one of each kind when it is made, so make it now, before training, as the env will."""
@@ -206,6 +231,8 @@ def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
         raise ConfigError(source, f"{field}.init_from", f"no policy file {quote(stage.init_from)}; allowed: null, previous or a .zip path")
     if stage.scenarios.file is not None and not Path(stage.scenarios.file).is_file():
         raise ConfigError(source, f"{field}.scenarios.file", f"no such file {quote(stage.scenarios.file)}")
+    if stage.env_kwargs.get("robot_family") is None:  # a family's robots are differential drives, its worlds drawn per robot
+        _check_worlds(stage, source, field)
 
 
 def curriculum_from_mapping(data: dict, source: str | Path | None = None) -> CurriculumConfig:

@@ -29,7 +29,7 @@ from common.motion.table import (
     PLANNED, ROBOTS, ROUTE_LENGTH, ROW, RVO, RVO_MODE, RVO_MODES, SEEN_RADIUS, SHAPE, START_X, START_Y, STOPPED, TAIL,
     TARGET, THETA, UNOBSTRUCTED, V0, V1, WANDER, X, Y, MoverTable, mover_table, static_contacts,
 )
-from common.scenario import Scenario
+from common.scenario import MOVERS_ON_GRID, Scenario
 
 
 _MOVERS_STREAM = 0x6D6F76  # a word of the movers' seed sequence: their draws are a stream of their own
@@ -81,8 +81,7 @@ class Movers:
             raise ConfigError(None, "robot.shape", f"a {robot.shape} robot among movers is not modelled; allowed: "
                               "circle, box")
         if scenario.grid_map is not None:
-            raise ConfigError(None, "grid_map", "movers on a grid map are not modelled (they would not see it); "
-                              "allowed: a grid map without movers, or movers among shapes")
+            raise ConfigError(None, "grid_map", MOVERS_ON_GRID)  # a scenario copied without validation
         # The robot's body for contacts: shape, x, y, heading, radius, length, width, and how far
         # ahead of its pose the footprint's centre is.
         box = robot.shape == "box"
