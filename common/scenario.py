@@ -421,10 +421,6 @@ class WorldSpec(Frozen):
         return math.hypot(self.width, self.height)
 
 
-MOVERS_ON_GRID = ("movers on a grid map are not modelled (they would not see it); allowed: a grid map without "
-                  "movers, or movers among shapes")
-
-
 class Scenario(Frozen):
     """Everything a tier needs to build a world: robot, sensors, world, start, goal, obstacles.
 
@@ -455,8 +451,6 @@ class Scenario(Frozen):
         movers = [(i, o.motion) for i, o in enumerate(self.obstacles) if getattr(o, "motion", None) is not None]
         if len(movers) > MAX_MOVERS:
             raise ValueError(f"{len(movers):,} moving obstacles; allowed: at most {MAX_MOVERS}")
-        if movers and self.grid_map is not None:
-            raise ValueError(f"grid_map: {MOVERS_ON_GRID}")
         groups: dict[str, Motion] = {}
         for index, motion in movers + ([(-1, self.robot_motion)] if self.robot_motion is not None else []):
             where = "robot_motion" if index < 0 else f"obstacles.{index}.{self.obstacles[index].type}.motion"
@@ -571,15 +565,16 @@ def _models_in(annotation: Any) -> list[type[BaseModel]]:
 def allowed_keys(model: type[BaseModel], loc: Sequence[Any]) -> list[str] | None:
     """The keys allowed beside the unknown key at ``loc`` (a pydantic error's path from ``model``);
     None where the path leaves the models (a union member pydantic names by its tag, say)."""
-    models = [model]
+    models, tag = [model], "type"
     for part in loc[:-1]:
         if isinstance(part, int):
             continue  # a list's item: its models are already the field's
-        held = [m.model_fields[part].annotation for m in models if part in m.model_fields]
+        held = [m.model_fields[part] for m in models if part in m.model_fields]
         if held:
-            models = [inner for annotation in held for inner in _models_in(annotation)]
-        else:  # a tagged union's member: the one whose type field is that tag
-            models = [m for m in models if "type" in m.model_fields and m.model_fields["type"].default == part]
+            models = [inner for info in held for inner in _models_in(info.annotation)]
+            tag = next((info.discriminator for info in held if isinstance(info.discriminator, str)), "type")
+        else:  # a tagged union's member: the one whose tag field holds that tag
+            models = [m for m in models if tag in m.model_fields and m.model_fields[tag].default == part]
         if not models:
             return None
     return sorted({key for m in models for key in m.model_fields}) if len(models) == 1 else None

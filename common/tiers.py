@@ -57,7 +57,15 @@ def generator_template(tier: str) -> Scenario:
     return template() if isinstance(template, type) else template
 
 
-def refuse_unbuildable(tier: str, scenario: Scenario) -> None:
-    """A one-line error for what ``tier`` cannot build of ``scenario``, found without building it."""
+def as_built(tier: str, scenario: Scenario, conditions: Conditions) -> Scenario:
+    """``scenario`` as a training tier's world drives it under ``conditions``, found without
+    building the world; or a one-line error for what the tier cannot build, checked in the
+    world's order: the tier's own refusals of the scenario as written, then its movers' under
+    the conditions."""
+    from common.motion.movers import refuse_unmodelled
+
     if tier in _REFUSALS:
         _load(tier, _REFUSALS)(scenario)
+    conditioned = conditions.for_tier(tier).scenario(scenario)
+    refuse_unmodelled(conditioned)
+    return conditioned

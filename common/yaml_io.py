@@ -92,10 +92,12 @@ class _BoundedLoader(yaml.composer.Composer, *((_Parser,) if _Parser else (yaml.
         Python's digit limit) is refused naming its line, not a ValueError from deep inside PyYAML."""
         try:
             value = super().construct_object(node, deep)
-        except (ValueError, OverflowError) as exc:
+        except (ValueError, OverflowError, KeyError) as exc:  # KeyError: `!!bool maybe`
             kind = {"timestamp": "date"}.get(node.tag.rsplit(":", 1)[-1], node.tag.rsplit(":", 1)[-1])
-            if kind == "int":
+            if kind == "int" and node.value.lstrip("+-").replace("_", "").isdigit():
                 problem = f"an integer of more than {MAX_DIGITS} digits"
+            elif isinstance(exc, KeyError):
+                problem = f"{quote(node.value)} is not a valid {kind}"
             else:
                 reason = str(exc).split(":")[0][:80]
                 problem = f"{quote(node.value)} is not a valid {kind} ({reason})"
@@ -180,7 +182,7 @@ def parse_yaml(text: str, source: str | Path | None = None) -> Any:
         if isinstance(exc, yaml.constructor.ConstructorError) and "for the tag " in str(exc.problem):
             # A tag asks the reader to build an object (python/object, say): plain YAML only, nothing runs.
             tag = str(exc.problem).split("for the tag ", 1)[1].replace("tag:yaml.org,2002:", "!!")
-            problem = f"the tag {tag} is refused; allowed: plain YAML (no tags)"
+            problem = f"the tag {tag} is refused; allowed: plain YAML and YAML's standard !! tags"
         raise ConfigError(source, f"line {mark.line + 1}" if mark is not None else None, problem) from None
     finally:
         loader.dispose()

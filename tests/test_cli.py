@@ -19,6 +19,11 @@ BAD_FILES = {
     "unknown key": ("name: x\nwheels: 3\n", "wheels: unknown key; allowed: difficulty, goal, goal_threshold, grid_map"),
     "unknown key of an obstacle": ("obstacles:\n  - {type: circle, x: 5, y: 5, radius: 1, colour: red}\n",
                                    "obstacles.0.circle.colour: unknown key; allowed: height, motion, radius, type"),
+    "an unknown key of a behaviour": (
+        "obstacles:\n  - {type: circle, x: 5, y: 5, radius: 0.3, motion: {behavior: {name: dash, foo: 1}, goals: [[6, 6]]}}\n",
+        "obstacles.0.circle.motion.behavior.dash.foo: unknown key; allowed: angle_tolerance, name, yield_distance"),
+    "a boolean that is none": ("name: !!bool maybe\n", "line 1: 'maybe' is not a valid bool; refused"),
+    "an integer that is none": ("world: {width: !!int 1x}\n", "line 1: '1x' is not a valid int"),
     "a tag that builds an object": ("!!python/object:os.system\nx: 1\n",
                                     "line 1: the tag '!!python/object:os.system' is refused; allowed: plain YAML"),
     "wrong type": ("world:\n  width: wide\n", "world.width: Input should be a valid number"),
@@ -50,6 +55,20 @@ def test_validate_accepts_a_good_file_and_missing_files_fail(tmp_path, capsys):
     assert "ok:" in capsys.readouterr().out
     assert main(["validate", str(tmp_path / "missing.yaml")]) == 2
     assert "no such file" in capsys.readouterr().err
+
+
+def test_validate_warns_of_a_curriculum_stage_on_a_world_irsim_runs_as_it_is(tmp_path, capsys):
+    (tmp_path / "irsim.yaml").write_text(
+        "world: {height: 10, width: 10}\nrobot:\n  - kinematics: {name: diff}\n    shape: {name: circle, radius: 0.2}\n"
+        "    state: [2.35, 5, 3.14159]\n    goal: [9, 9, 0]\nobstacle:\n  - shape: {name: rectangle, length: 1, width: 1}\n"
+        "    state: [3, 5, 0]\n")
+    curriculum = tmp_path / "c.yaml"
+    curriculum.write_text("name: c\nstages:\n  - name: s\n    scenarios: {file: irsim.yaml}\n    budget: 1000\n"
+                          "    eval: {suite: sparse}\n")
+    assert main(["validate", str(curriculum)]) == 0
+    captured = capsys.readouterr()
+    assert captured.out == f"ok: {curriculum}: curriculum 'c', 1 stages\n"
+    assert captured.err.startswith("warning: ") and "start: (2.35, 5)" in captured.err and captured.err.count("\n") == 1
 
 
 def test_validate_answers_every_file_and_fails_if_any_is_bad(tmp_path, capsys):

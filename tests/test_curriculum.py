@@ -37,7 +37,8 @@ def _with(change: dict, stage: dict | None = None) -> dict:
 
 
 @pytest.mark.parametrize("data, field, message", [
-    (_with({"seeds": 1}), "seeds", "unknown key"),
+    (_with({"seeds": 1}), "seeds", "unknown key; allowed: device, evidence, name, seed, stages"),
+    (_with({}, {"n_env": 3}), "stages.0.n_env", "unknown key; allowed: action_mapping, algorithm, budget"),
     (_with({"device": "tpu"}), "device", "'auto', 'cpu', 'cuda' or 'mps'"),
     (_with({}, {"algorithm": "dqn"}), "stages.0.algorithm", "'ppo', 'sac' or 'td3'"),
     (_with({}, {"budget": -5}), "stages.0.budget", "greater than or equal to 1"),
@@ -70,6 +71,10 @@ def test_schema_errors_name_the_field_and_what_is_allowed(data, field, message):
     ("physics3d", None, "grid_map: {image: map.png}\n",
      "stages.0.scenarios: scenario: grid_map: an occupancy grid map is not built in the 3D tier"),
     ("physics3d", {"mix": {"sparse": 1, "maze": 1}}, None, "maze-train-0: grid_map: an occupancy grid map is not built"),
+    ("physics3d", None, "robot: {kinematics: omni}\n",
+     "stages.0.scenarios: scenario: robot.kinematics: the 3D robot is a differential drive, not 'omni'"),
+    ("flatland", {"suite": "crowd_unaware"}, None, "stages.0.scenarios: world: 'crowd_unaware' is neither a scenario kind"),
+    ("flatland", None, "MOVERS_ON_A_MAZE", "stages.0.scenarios: maze-train-0: grid_map: movers on a grid map are not modelled"),
 ])
 def test_a_stage_whose_worlds_its_tier_or_its_policy_cannot_drive_is_refused(world, scenarios, file, message, tmp_path):
     """The worlds a stage's env would draw are checked as it validates, not when training starts."""
@@ -77,7 +82,7 @@ def test_a_stage_whose_worlds_its_tier_or_its_policy_cannot_drive_is_refused(wor
 
     Image.new("L", (20, 20), 255).save(tmp_path / "map.png")
     if file is not None:
-        (tmp_path / "world.yaml").write_text(file)
+        (tmp_path / "world.yaml").write_text(_movers_on_a_maze() if file == "MOVERS_ON_A_MAZE" else file)
         scenarios = {"file": "world.yaml"}
     data = _with({}, {"world": world, "scenarios": scenarios, "normalize": False, "observation": "lidar43"})
     path = tmp_path / "c.yaml"
@@ -87,14 +92,28 @@ def test_a_stage_whose_worlds_its_tier_or_its_policy_cannot_drive_is_refused(wor
         str(error.value)
 
 
-def test_movers_on_a_grid_map_are_refused_as_the_scenario_is_read():
-    from common.scenario import scenario_from_mapping
-
+def _movers_on_a_maze() -> str:
+    """A maze with one person dashing across it: IR-SIM runs it, this project's tiers do not."""
     data = generate("maze", 0).model_dump(mode="json")
     data["obstacles"] = [{"type": "circle", "x": 1.0, "y": 1.0, "radius": 0.2,
                           "motion": {"behavior": {"name": "dash"}, "goals": [[2.0, 2.0]]}}]
-    with pytest.raises(ConfigError, match="grid_map: movers on a grid map are not modelled"):
-        scenario_from_mapping(data)
+    return yaml.safe_dump(data)
+
+
+@pytest.mark.parametrize("env_kwargs, message", [
+    ({"robot": {"radius": 0.2, "motion_noise": [0.01, 0.01, 0.01, 0.01]}, "world": "physics3d"},
+     "stages.0.env_kwargs.robot.motion_noise: IR-SIM's kinematic stand-in is not modelled in the 3D tier"),
+    ({"robot_family": True}, "stages.0.scenarios: robot_family: robots drawn per episode need worlds generated"),
+])
+def test_a_stage_whose_conditions_its_worlds_cannot_take_names_the_knob(env_kwargs, message, tmp_path):
+    (tmp_path / "world.yaml").write_text("name: w\n")
+    world = env_kwargs.pop("world", "flatland")
+    scenarios = {"kind": "sparse"} if world == "physics3d" else {"file": "world.yaml"}
+    data = _with({}, {"world": world, "scenarios": scenarios, "normalize": False, "observation": "lidar43",
+                      "env_kwargs": env_kwargs})
+    with pytest.raises(ConfigError) as error:
+        curriculum_from_mapping(data, tmp_path / "c.yaml")
+    assert message in str(error.value), str(error.value)
 
 
 def test_shipped_curricula_validate(capsys):

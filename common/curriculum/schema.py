@@ -171,28 +171,34 @@ def _check_env_kwargs(stage: StageSpec, source: str | Path, field: str) -> None:
 
 
 def _check_worlds(stage: StageSpec, source: str | Path, field: str) -> None:
-    """The stage's worlds as its env draws them (its file's, or one of each kind or its suite's
-    first), under its conditions: each must be buildable in its tier, and a differential drive
-    (a stage's policy file holds a (v, w) actor), whichever the robot came from."""
+    """The stage's worlds as its env gets them: its ``world`` argument refused where the env would
+    refuse it (a suite that is no generator kind, robots drawn per episode on a file), then its
+    file's world or one of each kind, checked in the order a world checks them: what the tier
+    cannot build as written, then under the stage's conditions what its movers cannot, and the
+    drive (a stage's policy file holds a (v, w) actor), whichever the robot came from."""
     from common.generators import generate
-    from common.tiers import refuse_unbuildable
-    from common.world_file import WorldFile
+    from common.tiers import as_built
 
     spec, template = stage.scenarios, generator_template(stage.world)
-    if spec.file is not None:
-        worlds = [WorldFile(spec.file).initial]
-    elif spec.suite is not None:
-        worlds = [next(SUITES[spec.suite].scenarios(count=1, template=template))]
-    else:
-        worlds = [generate(kind, 0, spec.difficulty, "train", template) for kind in ([spec.kind] if spec.kind else spec.mix)]
     conditions = conditions_of(stage.env_kwargs, source, field).for_tier(stage.world)
-    for world in worlds:
+    if conditions.profile is not None:  # the env's generators draw around the robot it drives
+        template = template.model_copy(update={"robot": conditions.profile})
+    world = spec.kind or spec.mix or spec.suite or spec.file  # what the runner hands the env
+    try:
+        drawn = scenario_source(world, spec.difficulty, template, family=conditions.robot_family)
+    except ConfigError as error:
+        raise ConfigError(source, f"{field}.scenarios", f"{error.field}: {error.problem}") from None
+    if spec.file is not None:
+        worlds = [drawn.file.initial]  # the file as read once (its warnings said once)
+    else:
+        worlds = [generate(kind, 0, spec.difficulty, "train", template) for kind in ([world] if isinstance(world, str) else world)]
+    for raw in worlds:
         try:
-            world = conditions.scenario(world)
-            refuse_other_drives(world.robot, "a curriculum stage")
-            refuse_unbuildable(stage.world, world)
+            refuse_other_drives(as_built(stage.world, raw, conditions).robot, "a curriculum stage")
         except ConfigError as error:
-            raise ConfigError(source, f"{field}.scenarios", f"{world.name}: {error.field}: {error.problem}") from None
+            given = "robot" in stage.env_kwargs and error.field.startswith("robot")
+            where = f"{field}.env_kwargs.{error.field}" if given else f"{field}.scenarios"
+            raise ConfigError(source, where, error.problem if given else f"{raw.name}: {error.field}: {error.problem}") from None
 
 
 def _check_robot_fits(stage: StageSpec, robot: RobotProfile) -> None:
@@ -231,8 +237,7 @@ def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
         raise ConfigError(source, f"{field}.init_from", f"no policy file {quote(stage.init_from)}; allowed: null, previous or a .zip path")
     if stage.scenarios.file is not None and not Path(stage.scenarios.file).is_file():
         raise ConfigError(source, f"{field}.scenarios.file", f"no such file {quote(stage.scenarios.file)}")
-    if stage.env_kwargs.get("robot_family") is None:  # a family's robots are differential drives, its worlds drawn per robot
-        _check_worlds(stage, source, field)
+    _check_worlds(stage, source, field)
 
 
 def curriculum_from_mapping(data: dict, source: str | Path | None = None) -> CurriculumConfig:
@@ -241,7 +246,7 @@ def curriculum_from_mapping(data: dict, source: str | Path | None = None) -> Cur
     try:
         config = CurriculumConfig.model_validate(data)
     except ValidationError as exc:
-        raise pydantic_error(source, exc) from None
+        raise pydantic_error(source, exc, CurriculumConfig) from None
     if source is not None:
         config = _resolve_paths(config, Path(source).parent)
     for index, stage in enumerate(config.stages):

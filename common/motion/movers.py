@@ -29,7 +29,7 @@ from common.motion.table import (
     PLANNED, ROBOTS, ROUTE_LENGTH, ROW, RVO, RVO_MODE, RVO_MODES, SEEN_RADIUS, SHAPE, START_X, START_Y, STOPPED, TAIL,
     TARGET, THETA, UNOBSTRUCTED, V0, V1, WANDER, X, Y, MoverTable, mover_table, static_contacts,
 )
-from common.scenario import MOVERS_ON_GRID, Scenario
+from common.scenario import Scenario
 
 
 _MOVERS_STREAM = 0x6D6F76  # a word of the movers' seed sequence: their draws are a stream of their own
@@ -47,6 +47,18 @@ class MoverStates(NamedTuple):
 
     rows: np.ndarray
     labels: tuple[str, ...]
+
+
+def refuse_unmodelled(scenario: Scenario) -> None:
+    """A one-line error for movers this project's motion code cannot model (IR-SIM itself runs them)."""
+    if not scenario.movers:
+        return
+    robot = scenario.robot
+    if robot.shape in ("polygon", "compound"):
+        raise ConfigError(None, "robot.shape", f"a {robot.shape} robot among movers is not modelled; allowed: circle, box")
+    if scenario.grid_map is not None:
+        raise ConfigError(None, "grid_map", "movers on a grid map are not modelled (they would not see it); "
+                          "allowed: a grid map without movers, or movers among shapes")
 
 
 class Movers:
@@ -76,12 +88,8 @@ class Movers:
         self._initial_objects = t.objects.copy()
         self._states = np.empty((self.count, 8))
         self._circle_rows, self._box_rows = np.empty((len(self._circles), 3)), np.empty((len(self._boxes), 6))
+        refuse_unmodelled(scenario)
         robot = scenario.robot
-        if robot.shape in ("polygon", "compound"):
-            raise ConfigError(None, "robot.shape", f"a {robot.shape} robot among movers is not modelled; allowed: "
-                              "circle, box")
-        if scenario.grid_map is not None:
-            raise ConfigError(None, "grid_map", MOVERS_ON_GRID)  # a scenario copied without validation
         # The robot's body for contacts: shape, x, y, heading, radius, length, width, and how far
         # ahead of its pose the footprint's centre is.
         box = robot.shape == "box"
