@@ -15,8 +15,8 @@ than the world's diagonal.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 import typing
+from pathlib import Path
 from typing import Annotated, Any, Literal, Sequence, Union
 
 import numpy as np
@@ -585,10 +585,11 @@ def pydantic_error(source: str | Path | None, error: ValidationError, model: typ
     ``model`` (the model validated) also lists the keys allowed there."""
     first = error.errors()[0]
     # Union members add tags such as "list[constrained-int]" to the path: they name no field.
-    field = ".".join(str(part) for part in first["loc"] if "[" not in str(part)) or None
+    path = [part for part in first["loc"] if "[" not in str(part)]
+    field = ".".join(str(part) for part in path) or None
     message = first["msg"]
     if first["type"] == "extra_forbidden":
-        allowed = allowed_keys(model, [part for part in first["loc"] if "[" not in str(part)]) if model else None
+        allowed = allowed_keys(model, path) if model else None
         message = "unknown key" + (f"; allowed: {', '.join(allowed)}" if allowed else "")
     elif first["type"] == "value_error":
         message = message.removeprefix("Value error, ")  # our validators' messages say what they got

@@ -21,7 +21,10 @@ from common.world_file import WorldFile
 
 
 class ScenarioSource(Protocol):
-    """Anything that yields a scenario per episode."""
+    """Anything that yields a scenario per episode; ``examples`` are the worlds it made or read as
+    it was built (one of each kind it draws), for checks before the first episode."""
+
+    examples: list[Scenario]
 
     def draw(self, rng: np.random.Generator, resample: bool = False) -> Scenario: ...
 
@@ -31,6 +34,7 @@ class FixedSource:
 
     def __init__(self, scenario: Scenario) -> None:
         self.scenario = scenario
+        self.examples = [scenario]
 
     def draw(self, rng: np.random.Generator, resample: bool = False) -> Scenario:
         return self.scenario
@@ -46,7 +50,7 @@ class ListSource:
             if not isinstance(scenario, Scenario):
                 raise ConfigError(None, f"world.{index}", f"got {quote(scenario)}; allowed: a list of Scenario objects "
                                   "(several kinds: a mix such as {'sparse': 1, 'cluttered': 1})")
-        self.scenarios = list(scenarios)
+        self.scenarios = self.examples = list(scenarios)
 
     def draw(self, rng: np.random.Generator, resample: bool = False) -> Scenario:
         return self.scenarios[int(rng.integers(len(self.scenarios)))]
@@ -61,7 +65,7 @@ class GeneratorSource:
         self.kind, self.difficulty, self.template, self.family = kind, difficulty, template or Scenario(), family
         # Fail now, not at the first reset (with a family, for one robot of it).
         robot = family.draw(np.random.default_rng(0), self.template.robot) if family else self.template.robot
-        generate(kind, 0, difficulty, "train", self.template.model_copy(update={"robot": robot}))
+        self.examples = [generate(kind, 0, difficulty, "train", self.template.model_copy(update={"robot": robot}))]
 
     def draw(self, rng: np.random.Generator, resample: bool = False) -> Scenario:
         template = self.template
@@ -78,6 +82,7 @@ class MixSource:
         if not weights or any(w <= 0 for w in weights.values()):
             raise ConfigError(None, "world", "a mix needs at least one kind, each with a positive weight")
         self.sources = [_kind_source(kind, difficulty, template, family) for kind in weights]
+        self.examples = [example for source in self.sources for example in source.examples]
         total = float(sum(weights.values()))
         self.probabilities = [w / total for w in weights.values()]
 
@@ -92,6 +97,7 @@ class FileSource:
     def __init__(self, path: str | Path, resample: bool = False) -> None:
         self.file = WorldFile(path)
         self.resample = resample
+        self.examples = [self.file.initial]
 
     def draw(self, rng: np.random.Generator, resample: bool = False) -> Scenario:
         if self.file.random and (resample or self.resample):

@@ -42,7 +42,7 @@ from common.errors import ConfigError, quote
 from common.generators import KINDS, SUITES
 from common.observations import LAYOUTS
 from common.rewards import resolve_reward_spec
-from common.scenario import RobotProfile, pydantic_error
+from common.scenario import pydantic_error
 from common.sources import scenario_source
 from common.task import MAX_STEPS
 from common.tiers import TIERS, generator_template
@@ -155,11 +155,7 @@ def _check_env_kwargs(stage: StageSpec, source: str | Path, field: str) -> None:
         if key not in allowed:
             raise ConfigError(source, f"{field}.{key}", f"not a {stage.world} env argument; allowed: {', '.join(allowed)}")
     try:
-        conditions = conditions_of(stage.env_kwargs, source, field).for_tier(stage.world)
-        if conditions.profile is not None:
-            # A stage's policy file holds a (v, w) actor: it trains differential drives only.
-            refuse_other_drives(conditions.profile, "a curriculum stage")
-            _check_robot_fits(stage, conditions.profile)
+        conditions_of(stage.env_kwargs, source, field).for_tier(stage.world)  # its robot: _check_worlds
         if "goal_threshold" in stage.env_kwargs:
             from common.task import threshold_range
 
@@ -171,12 +167,12 @@ def _check_env_kwargs(stage: StageSpec, source: str | Path, field: str) -> None:
 
 
 def _check_worlds(stage: StageSpec, source: str | Path, field: str) -> None:
-    """The stage's worlds as its env gets them: its ``world`` argument refused where the env would
-    refuse it (a suite that is no generator kind, robots drawn per episode on a file), then its
-    file's world or one of each kind, checked in the order a world checks them: what the tier
-    cannot build as written, then under the stage's conditions what its movers cannot, and the
-    drive (a stage's policy file holds a (v, w) actor), whichever the robot came from."""
-    from common.generators import generate
+    """The stage's worlds as its env gets them: its scenario source built from the same argument
+    (so refused where the env would refuse it: a robot too wide for a kind's layouts, a suite that
+    is no generator kind, robots drawn per episode on a file), then each world the source made
+    (one of each kind, or its file's) checked in the order a world checks it: what the tier cannot
+    build as written, then under the stage's conditions what its movers cannot, and the drive (a
+    stage's policy file holds a (v, w) actor), whichever the robot came from."""
     from common.tiers import as_built
 
     spec, template = stage.scenarios, generator_template(stage.world)
@@ -187,27 +183,20 @@ def _check_worlds(stage: StageSpec, source: str | Path, field: str) -> None:
     try:
         drawn = scenario_source(world, spec.difficulty, template, family=conditions.robot_family)
     except ConfigError as error:
-        raise ConfigError(source, f"{field}.scenarios", f"{error.field}: {error.problem}") from None
-    if spec.file is not None:
-        worlds = [drawn.file.initial]  # the file as read once (its warnings said once)
-    else:
-        worlds = [generate(kind, 0, spec.difficulty, "train", template) for kind in ([world] if isinstance(world, str) else world)]
-    for raw in worlds:
+        raise _world_error(stage, source, field, error) from None
+    for raw in drawn.examples:
         try:
             refuse_other_drives(as_built(stage.world, raw, conditions).robot, "a curriculum stage")
         except ConfigError as error:
-            given = "robot" in stage.env_kwargs and error.field.startswith("robot")
-            where = f"{field}.env_kwargs.{error.field}" if given else f"{field}.scenarios"
-            raise ConfigError(source, where, error.problem if given else f"{raw.name}: {error.field}: {error.problem}") from None
+            raise _world_error(stage, source, field, error, raw.name) from None
 
 
-def _check_robot_fits(stage: StageSpec, robot: RobotProfile) -> None:
-    """A robot too wide for the stage's generator kinds finds no layout: the env's scenario source
-    tries one of each kind when it is made, so make it now, before training, as the env will."""
-    spec = stage.scenarios
-    if spec.kind or spec.mix:
-        template = generator_template(stage.world).model_copy(update={"robot": robot})
-        scenario_source(spec.kind or spec.mix, spec.difficulty, template)
+def _world_error(stage: StageSpec, source: str | Path, field: str, error: ConfigError, world: str | None = None) -> ConfigError:
+    """A problem of a stage's worlds, named where the stage set it: its own robot (``env_kwargs``),
+    else its scenarios (and the world that showed it)."""
+    if "robot" in stage.env_kwargs and error.field.startswith("robot"):
+        return ConfigError(source, f"{field}.env_kwargs.{error.field}", error.problem)
+    return ConfigError(source, f"{field}.scenarios", f"{world + ': ' if world else ''}{error.field}: {error.problem}")
 
 
 def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
