@@ -43,6 +43,8 @@ def _with(change: dict, stage: dict | None = None) -> dict:
     (_with({}, {"algorithm": "dqn"}), "stages.0.algorithm", "'ppo', 'sac' or 'td3'"),
     (_with({}, {"budget": -5}), "stages.0.budget", "greater than or equal to 1"),
     (_with({}, {"hyperparams": {"learning_rte": 0.1}}), "stages.0.hyperparams.learning_rte", "not a PPO argument; allowed:"),
+    (_with({}, {"hyperparams": {"policy_kwargs": {"net_arc": [64]}}}), "stages.0.hyperparams.policy_kwargs.net_arc",
+     "unknown key; allowed: activation_fn, bounded_mean"),
     (_with({}, {"reward": {"speed": 1}}), "stages.0.reward.speed", "unknown reward term"),
     (_with({}, {"reward": {"proximity": {"weight": -1, "threshold": "fast"}}}), "stages.0.reward.proximity.threshold",
      "got 'fast'; allowed: a finite number (default 0.3)"),

@@ -178,6 +178,8 @@ def test_a_pickle_in_place_of_weights_is_refused_without_running(untrained_polic
     (lambda m: m.update(policy_kwargs={"net_arch": [32]}), "policy.pth: the weights do not fit"),
     (lambda m: m.update(goal_distance_scale=float("inf")), "goal_distance_scale"),
     (lambda m: m.update(policy_kwargs={"activation_fn": "os.system"}), "activation_fn"),
+    (lambda m: m.update(policy_kwargs={"net_arc": [32]}),
+     "nav_manifest.json: policy_kwargs.net_arc: unknown key; allowed: activation_fn, bounded_mean"),
 ])
 def test_an_inconsistent_manifest_is_a_one_line_refusal(untrained_policy, tmp_path, capsys, change, expected):
     manifest = json.loads(zipfile.ZipFile(untrained_policy).read("nav_manifest.json"))

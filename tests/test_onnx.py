@@ -128,10 +128,12 @@ def _set_metadata(key: str, value: str | None):
     return change
 
 
-def _other_layout(model) -> None:
-    """The manifest says nav7 (7 values) over a graph that reads 43."""
-    manifest = json.loads(next(e.value for e in model.metadata_props if e.key == "nav_manifest"))
-    _set_metadata("nav_manifest", json.dumps({**manifest, "observation": "nav7"}))(model)
+def _manifest_with(**change):
+    """The manifest's ``change``d keys over the same graph."""
+    def rewrite(model) -> None:
+        manifest = json.loads(next(e.value for e in model.metadata_props if e.key == "nav_manifest"))
+        _set_metadata("nav_manifest", json.dumps({**manifest, **change}))(model)
+    return rewrite
 
 
 @pytest.mark.parametrize(("case", "make", "field", "problem"), [
@@ -145,8 +147,10 @@ def _other_layout(model) -> None:
      "nav_manifest", "not valid JSON"),
     ("unknown format", lambda source, target: _rewritten(source, target, _set_metadata("nav_onnx", '{"format": 9}')),
      "nav_onnx: format", "allowed: 1"),
-    ("another layout", lambda source, target: _rewritten(source, target, _other_layout), "graph observation",
-     "expected one float tensor 'observation' of (batch, 7)"),
+    ("another layout", lambda source, target: _rewritten(source, target, _manifest_with(observation="nav7")),
+     "graph observation", "expected one float tensor 'observation' of (batch, 7)"),
+    ("unknown policy key", lambda source, target: _rewritten(source, target, _manifest_with(policy_kwargs={"net_arc": [8]})),
+     "nav_manifest: policy_kwargs.net_arc", "unknown key; allowed: activation_fn, bounded_mean"),
 ])
 def test_a_damaged_or_mismatched_onnx_file_is_refused_in_one_line(exported, tmp_path, case, make, field, problem):
     from common.curriculum.onnx_policy import OnnxPolicy

@@ -125,5 +125,5 @@ def policy_kwargs_from_yaml(value: Any, source: str | Path | None = None, field:
     try:
         return PolicyKwargs.model_validate(value)
     except ValidationError as exc:
-        error = pydantic_error(None, exc)
+        error = pydantic_error(None, exc, PolicyKwargs)
         raise ConfigError(source, f"{field}.{error.field}" if error.field else field, error.problem) from None

@@ -85,7 +85,7 @@ class OnnxPolicy:
         except ValidationError as exc:
             from common.scenario import pydantic_error
 
-            error = pydantic_error(None, exc)
+            error = pydantic_error(None, exc, Manifest)
             raise ConfigError(self.path, f"{MANIFEST_KEY}: {error.field}", error.problem) from None
         export = self._json(metadata, EXPORT_KEY)
         if export.get("format") != FORMAT:

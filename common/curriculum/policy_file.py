@@ -244,7 +244,7 @@ class PolicyFile:
         except ValidationError as exc:
             from common.scenario import pydantic_error
 
-            error = pydantic_error(None, exc)
+            error = pydantic_error(None, exc, Manifest)
             raise ConfigError(self.path, f"{MANIFEST}: {error.field}" if error.field else MANIFEST, error.problem) from None
 
     def read(self, name: str, limit: int = MAX_WEIGHTS_BYTES) -> bytes:
