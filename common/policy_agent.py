@@ -30,13 +30,22 @@ class PolicyAgent:
                  normalizer: Callable[[np.ndarray], np.ndarray] | None = None, name: str = "policy",
                  action_mapping: str = "linear", max_steps: int | None = None, env_kwargs: dict | None = None,
                  home: tuple[str, str, int, int] | None = None,
-                 predict: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
+                 predict: Callable[[np.ndarray], np.ndarray] | None = None, tier: str = "flatland") -> None:
         self.model, self.observation, self.goal_distance_scale = model, observation, goal_distance_scale
         self.predict = predict  # the deterministic action of one observation, if not model.predict's
         self.normalizer, self.name, self.action_mapping = normalizer, name, action_mapping
         self.max_steps = max_steps
         self.env_kwargs = dict(env_kwargs or {})  # what it trained with: its conditions are evaluated by default
         self.home = home  # (tier, suite, first seed, episodes) of its own test figure: its evaluation by default
+        self.tier = tier  # where it trained last
+
+    @property
+    def trained_conditions(self) -> dict:
+        """The conditions it trained with: a policy that trained on the URDF robot (whose stage sets
+        no ``robot``) meets that robot's 2D profile in flatland and IR-SIM, not the default circle."""
+        if self.tier == "physics3d" and not {"robot", "robot_family"} & self.env_kwargs.keys():
+            return {**self.env_kwargs, "robot": "physics3d"}
+        return self.env_kwargs
 
     def bind(self, robot: RobotProfile, lidar: LidarSpec, goal_threshold: float = 0.3) -> None:
         # Policy files hold a two-number (v, w) actor: they train and drive differential drives.

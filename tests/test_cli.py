@@ -350,6 +350,28 @@ def test_a_policys_conditions_are_evaluated_by_default_and_the_command_line_over
         _conditions(args, [agent, load_policy(untrained_policy)])
 
 
+def test_a_policy_trained_on_the_urdf_robot_meets_its_2d_profile_in_flatland_and_irsim(untrained_policy, tmp_path):
+    import shutil
+
+    from common.curriculum.cli import _conditions, _settle, build_parser
+    from common.curriculum.policy import load_policy
+    from common.curriculum.policy_file import update_manifest
+
+    path = tmp_path / "urdf.zip"
+    shutil.copy(untrained_policy, path)
+    update_manifest(path, {"tier": "physics3d", "env_kwargs": {"action_delay": [0, 1]}})
+    agent = load_policy(path)
+
+    def robot(*flags: str):
+        args = build_parser().parse_args(["eval", "--policy", str(path), *flags])
+        _settle(args, [agent])
+        return _conditions(args, [agent]).robot
+
+    assert robot("--world", "flatland") == "physics3d" and robot("--world", "irsim") == "physics3d"
+    assert robot("--world", "physics3d") == "physics3d"  # the tier's own default there
+    assert robot("--world", "flatland", "--env-kwargs", "robot:{radius: 0.3}") == {"radius": 0.3}
+
+
 def test_a_policy_is_judged_within_the_goal_radius_it_trained_for(untrained_policy, tmp_path):
     import shutil
 

@@ -178,6 +178,7 @@ def test_a_pickle_in_place_of_weights_is_refused_without_running(untrained_polic
     (lambda m: m.update(policy_kwargs={"net_arch": [32]}), "policy.pth: the weights do not fit"),
     (lambda m: m.update(goal_distance_scale=float("inf")), "goal_distance_scale"),
     (lambda m: m.update(policy_kwargs={"activation_fn": "os.system"}), "activation_fn"),
+    (lambda m: m.update(tier="mars"), "nav_manifest.json: tier: Input should be 'flatland' or 'physics3d'"),
     (lambda m: m.update(policy_kwargs={"net_arc": [32]}),
      "nav_manifest.json: policy_kwargs.net_arc: unknown key; allowed: activation_fn, bounded_mean"),
 ])

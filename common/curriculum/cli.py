@@ -319,8 +319,8 @@ def _conditions(args: argparse.Namespace, agents) -> "Conditions":
     policies among them trained with (which must agree, so every agent meets the same world)."""
     from common.conditions import Conditions, conditions_of
 
-    trained = {json.dumps(conditions_of(agent.env_kwargs).given(), sort_keys=True)
-               for agent in agents if hasattr(agent, "env_kwargs")}
+    trained = {json.dumps(conditions_of(agent.trained_conditions).given(), sort_keys=True)
+               for agent in agents if hasattr(agent, "trained_conditions")}
     override = dict(args.env_kwargs or [])
     if len(trained) > 1 and not override:
         raise ConfigError(None, "--policy", "these policies trained under different conditions "

@@ -53,7 +53,7 @@ def compare_worlds(policy_path: str | Path, suite: str, episodes: int, seed: int
     scenarios, and where each episode whose outcome differs parts (:func:`first_difference`)."""
     agent = load_policy(policy_path)
     # The knobs IR-SIM cannot model (delays, wheel dynamics) are dropped for both worlds alike.
-    shared = Conditions.parse(conditions_of(agent.env_kwargs).for_tier("irsim", strict=False).given())
+    shared = Conditions.parse(conditions_of(agent.trained_conditions).for_tier("irsim", strict=False).given())
     scenarios = list(_scenarios(suite, episodes, seed))
     radius = judged_radius(agent.env_kwargs)
     result: dict[str, Any] = {world: evaluate([agent], scenarios, world, seed=seed, conditions=shared,

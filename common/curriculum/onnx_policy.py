@@ -128,4 +128,5 @@ def load_onnx_policy(path: str | Path, name: str | None = None, threads: int = 1
     manifest = policy.manifest
     return PolicyAgent(policy, manifest.observation, manifest.goal_distance_scale, None,
                        name=name or Path(path).stem, action_mapping=manifest.action_mapping,
-                       max_steps=manifest.max_steps, env_kwargs=manifest.env_kwargs, home=manifest.home)
+                       max_steps=manifest.max_steps, env_kwargs=manifest.env_kwargs, home=manifest.home,
+                       tier=manifest.tier)

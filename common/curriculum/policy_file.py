@@ -66,6 +66,7 @@ from common.errors import ConfigError
 from common.files import ZIP_DAMAGE, open_zip, parse_json, read_bytes, size_text, zip_damage
 from common.observations import LAYOUTS
 from common.task import MAX_STEPS
+from common.tiers import TIERS
 
 MANIFEST = "nav_manifest.json"
 NORMALIZER = "nav_normalizer.json"
@@ -99,15 +100,15 @@ class Manifest(BaseModel):
     timesteps: Annotated[int, Field(ge=0)] = 0
     n_updates: Annotated[int, Field(ge=0)] = 0
     env_kwargs: dict[str, Any] = {}
+    tier: Literal[TIERS] = "flatland"  # type: ignore[valid-type]  # where it trained last
 
     @property
     def home(self) -> tuple[str, str, int, int] | None:
         """(tier, suite, first seed, episodes) of the policy's own test figure (``final_eval``), if valid."""
         from common.generators import SUITES
-        from common.tiers import TIERS
 
-        final, tier = getattr(self, "final_eval", None), getattr(self, "tier", "flatland")
-        if not isinstance(final, dict) or tier not in TIERS:
+        final, tier = getattr(self, "final_eval", None), self.tier
+        if not isinstance(final, dict):
             return None
         suite, seed, episodes = final.get("suite"), final.get("first_seed"), final.get("episodes")
         whole = all(isinstance(n, int) and not isinstance(n, bool) for n in (seed, episodes))
