@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 QUOTE_CHARS = 80  # the most of a user's value an error message repeats
-MESSAGE_CHARS = 400  # a safety net: no message, however built, floods a terminal
+MESSAGE_CHARS = 1000  # a safety net: no message, however built, floods a terminal (the longest allowed-keys list is ~300)
 
 _short = reprlib.Repr()  # Python 3.11's Repr takes no keyword arguments
 _short.maxlevel, _short.maxdict, _short.maxlist, _short.maxtuple, _short.maxset = 2, 4, 4, 4, 4

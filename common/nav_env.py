@@ -20,9 +20,9 @@ from common.robots import footprint_reach
 from common.rewards import Reward, StepContext
 from common.conditions import Conditions
 from common.scenario import Scenario
-from common.sources import ScenarioSource, scenario_source
+from common.sources import ScenarioSource
 from common.task import DEFAULT_MAX_STEPS, GoalThreshold, Task
-from common.tiers import WorldLike, generator_template
+from common.tiers import WorldLike, tier_source
 
 
 class NavigationEnv(gym.Env):
@@ -51,11 +51,7 @@ class NavigationEnv(gym.Env):
         self.render_mode = render_mode
         # Every other keyword is a condition knob (common.conditions), validated there by name.
         self.conditions = Conditions.parse({k: v for k, v in conditions.items() if v is not None}).for_tier(self.tier)
-        template = template or generator_template(self.tier)
-        if self.conditions.profile is not None:
-            # Generated scenarios leave gaps sized for the robot that will drive them.
-            template = template.model_copy(update={"robot": self.conditions.profile})
-        self.source = scenario_source(world, difficulty, template, resample, self.conditions.robot_family)
+        self.source = tier_source(self.tier, world, difficulty, self.conditions, template, resample)
         self.task = Task(goal_threshold, max_steps)
         self.observation_name = observation
         self.action_mapping = action_mapping

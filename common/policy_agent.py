@@ -43,8 +43,9 @@ class PolicyAgent:
     def trained_conditions(self) -> dict:
         """The conditions it trained with: a policy that trained on the URDF robot (whose stage sets
         no ``robot``) meets that robot's 2D profile in flatland and IR-SIM, not the default circle."""
-        if self.tier == "physics3d" and not {"robot", "robot_family"} & self.env_kwargs.keys():
-            return {**self.env_kwargs, "robot": "physics3d"}
+        given = self.env_kwargs
+        if self.tier == "physics3d" and given.get("robot") is None and not given.get("robot_family"):
+            return {**given, "robot": "physics3d"}
         return self.env_kwargs
 
     def bind(self, robot: RobotProfile, lidar: LidarSpec, goal_threshold: float = 0.3) -> None:

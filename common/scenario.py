@@ -14,6 +14,7 @@ than the world's diagonal.
 
 from __future__ import annotations
 
+import difflib
 import math
 import typing
 from pathlib import Path
@@ -590,7 +591,10 @@ def pydantic_error(source: str | Path | None, error: ValidationError, model: typ
     message = first["msg"]
     if first["type"] == "extra_forbidden":
         allowed = allowed_keys(model, path) if model else None
-        message = "unknown key" + (f"; allowed: {', '.join(allowed)}" if allowed else "")
+        message = "unknown key"
+        if allowed:
+            close = difflib.get_close_matches(str(path[-1]) if path else "", allowed, n=1)
+            message += (f" (did you mean {close[0]!r}?)" if close else "") + f"; allowed: {', '.join(allowed)}"
     elif first["type"] == "value_error":
         message = message.removeprefix("Value error, ")  # our validators' messages say what they got
     elif "input" in first:

@@ -57,15 +57,31 @@ def generator_template(tier: str) -> Scenario:
     return template() if isinstance(template, type) else template
 
 
-def as_built(tier: str, scenario: Scenario, conditions: Conditions) -> Scenario:
-    """``scenario`` as a training tier's world drives it under ``conditions``, found without
-    building the world; or a one-line error for what the tier cannot build, checked in the
-    world's order: the tier's own refusals of the scenario as written, then its movers' under
-    the conditions."""
-    from common.motion.movers import refuse_unmodelled
+def tier_source(tier: str, world, difficulty: float, conditions: Conditions, template: Scenario | None = None,
+                resample: bool = False):
+    """The :class:`~common.sources.ScenarioSource` an env of ``tier`` draws ``world`` from under
+    ``conditions`` (:func:`~common.sources.scenario_source` takes the same ``world``); generated
+    scenarios are drawn around the robot the conditions put in, so their gaps fit it."""
+    from common.sources import scenario_source
 
+    template = template or generator_template(tier)
+    if conditions.profile is not None:
+        template = template.model_copy(update={"robot": conditions.profile})
+    return scenario_source(world, difficulty, template, resample, conditions.robot_family)
+
+
+def refuse_as_written(tier: str, scenario: Scenario) -> None:
+    """A one-line error for what a training tier cannot build of ``scenario`` as written (its
+    robot and geometry, before any condition replaces them), found without building the world."""
     if tier in _REFUSALS:
         _load(tier, _REFUSALS)(scenario)
+
+
+def as_built(tier: str, scenario: Scenario, conditions: Conditions) -> Scenario:
+    """``scenario`` (which :func:`refuse_as_written` let through) as a training tier's world drives
+    it under ``conditions``; or a one-line error for movers it cannot model under them."""
+    from common.motion.movers import refuse_unmodelled
+
     conditioned = conditions.for_tier(tier).scenario(scenario)
     refuse_unmodelled(conditioned)
     return conditioned

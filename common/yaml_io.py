@@ -92,15 +92,21 @@ class _BoundedLoader(yaml.composer.Composer, *((_Parser,) if _Parser else (yaml.
         Python's digit limit) is refused naming its line, not a ValueError from deep inside PyYAML."""
         try:
             value = super().construct_object(node, deep)
-        except (ValueError, OverflowError, KeyError) as exc:  # KeyError: `!!bool maybe`
+        except (yaml.YAMLError, _Refused):
+            raise
+        except Exception as exc:
+            if not isinstance(node, yaml.ScalarNode):
+                raise
+            # PyYAML's standard constructors fail on what they cannot read in many ways: `!!bool
+            # maybe` a KeyError, `!!int +` an IndexError, `!!timestamp hello` an AttributeError.
             kind = {"timestamp": "date"}.get(node.tag.rsplit(":", 1)[-1], node.tag.rsplit(":", 1)[-1])
             if kind == "int" and node.value.lstrip("+-").replace("_", "").isdigit():
                 problem = f"an integer of more than {MAX_DIGITS} digits"
-            elif isinstance(exc, KeyError):
-                problem = f"{quote(node.value)} is not a valid {kind}"
-            else:
+            elif isinstance(exc, (ValueError, OverflowError)):
                 reason = str(exc).split(":")[0][:80]
                 problem = f"{quote(node.value)} is not a valid {kind} ({reason})"
+            else:
+                problem = f"{quote(node.value)} is not a valid {kind}"
             raise _Refused(problem, node.start_mark) from None
         if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= _TOO_LARGE_INT:
             raise _Refused(f"an integer of more than {MAX_DIGITS} digits", node.start_mark)

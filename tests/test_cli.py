@@ -17,6 +17,7 @@ GOOD = Scenario(name="good").to_yaml()
 
 BAD_FILES = {
     "unknown key": ("name: x\nwheels: 3\n", "wheels: unknown key; allowed: difficulty, goal, goal_threshold, grid_map"),
+    "a misspelt key": ("name: x\nrobot: {v_maxx: 1}\n", "robot.v_maxx: unknown key (did you mean 'v_max'?); allowed: accel_lateral"),
     "unknown key of an obstacle": ("obstacles:\n  - {type: circle, x: 5, y: 5, radius: 1, colour: red}\n",
                                    "obstacles.0.circle.colour: unknown key; allowed: height, motion, radius, type"),
     "an unknown key of a behaviour": (
@@ -24,6 +25,9 @@ BAD_FILES = {
         "obstacles.0.circle.motion.behavior.dash.foo: unknown key; allowed: angle_tolerance, name, yield_distance"),
     "a boolean that is none": ("name: !!bool maybe\n", "line 1: 'maybe' is not a valid bool; refused"),
     "an integer that is none": ("world: {width: !!int 1x}\n", "line 1: '1x' is not a valid int"),
+    "a sign for an integer": ("seed: !!int +\n", "line 1: '+' is not a valid int; refused"),
+    "a separator for an integer": ("seed: !!int _\n", "line 1: '_' is not a valid int; refused"),
+    "a word for a date": ("name: !!timestamp hello\n", "line 1: 'hello' is not a valid date; refused"),
     "a tag that builds an object": ("!!python/object:os.system\nx: 1\n",
                                     "line 1: the tag '!!python/object:os.system' is refused; allowed: plain YAML"),
     "wrong type": ("world:\n  width: wide\n", "world.width: Input should be a valid number"),
@@ -67,7 +71,7 @@ def test_validate_warns_of_a_curriculum_stage_on_a_world_irsim_runs_as_it_is(tmp
                           "    eval: {suite: sparse}\n")
     assert main(["validate", str(curriculum)]) == 0
     captured = capsys.readouterr()
-    assert captured.out == f"ok: {curriculum}: curriculum 'c', 1 stages\n"
+    assert captured.out == f"ok: {curriculum}: curriculum 'c', 1 stage\n"
     assert captured.err.startswith("warning: ") and "start: (2.35, 5)" in captured.err and captured.err.count("\n") == 1
 
 
@@ -80,6 +84,27 @@ def test_validate_answers_every_file_and_fails_if_any_is_bad(tmp_path, capsys):
     assert captured.out.splitlines() == [f"ok: {good}: scenario 'good', 0 obstacles"] * 2
     errors = captured.err.splitlines()
     assert len(errors) == 2 and str(bad) in errors[0] and str(missing) in errors[1] and "no such file" in errors[1]
+
+
+def test_validate_prints_a_worlds_warnings_and_leaves_a_librarys_to_python(tmp_path, capsys, monkeypatch):
+    import warnings
+
+    import common.world_file
+    from common.errors import ScenarioWarning
+
+    real = common.world_file.WorldFile
+
+    def warning_world_file(path):
+        warnings.warn("start touches an obstacle", ScenarioWarning)
+        warnings.warn("a library's deprecation", DeprecationWarning)
+        return real(path)
+
+    monkeypatch.setattr(common.world_file, "WorldFile", warning_world_file)
+    good = tmp_path / "good.yaml"
+    good.write_text(GOOD)
+    with pytest.warns(DeprecationWarning, match="a library's deprecation"):
+        assert main(["validate", str(good)]) == 0
+    assert capsys.readouterr().err == "warning: start touches an obstacle\n"
 
 
 def test_a_curriculum_given_as_a_scenario_file_is_named_for_what_it_is(tmp_path, capsys):
@@ -370,6 +395,9 @@ def test_a_policy_trained_on_the_urdf_robot_meets_its_2d_profile_in_flatland_and
     assert robot("--world", "flatland") == "physics3d" and robot("--world", "irsim") == "physics3d"
     assert robot("--world", "physics3d") == "physics3d"  # the tier's own default there
     assert robot("--world", "flatland", "--env-kwargs", "robot:{radius: 0.3}") == {"radius": 0.3}
+    update_manifest(path, {"env_kwargs": {"robot": None, "robot_family": False}})  # said, but no robot
+    agent = load_policy(path)
+    assert robot("--world", "flatland") == "physics3d"
 
 
 def test_a_policy_is_judged_within_the_goal_radius_it_trained_for(untrained_policy, tmp_path):

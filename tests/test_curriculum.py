@@ -37,14 +37,14 @@ def _with(change: dict, stage: dict | None = None) -> dict:
 
 
 @pytest.mark.parametrize("data, field, message", [
-    (_with({"seeds": 1}), "seeds", "unknown key; allowed: device, evidence, name, seed, stages"),
-    (_with({}, {"n_env": 3}), "stages.0.n_env", "unknown key; allowed: action_mapping, algorithm, budget"),
+    (_with({"seeds": 1}), "seeds", "unknown key (did you mean 'seed'?); allowed: device, evidence, name, seed, stages"),
+    (_with({}, {"n_env": 3}), "stages.0.n_env", "unknown key (did you mean 'n_envs'?); allowed: action_mapping, algorithm, budget"),
     (_with({"device": "tpu"}), "device", "'auto', 'cpu', 'cuda' or 'mps'"),
     (_with({}, {"algorithm": "dqn"}), "stages.0.algorithm", "'ppo', 'sac' or 'td3'"),
     (_with({}, {"budget": -5}), "stages.0.budget", "greater than or equal to 1"),
     (_with({}, {"hyperparams": {"learning_rte": 0.1}}), "stages.0.hyperparams.learning_rte", "not a PPO argument; allowed:"),
     (_with({}, {"hyperparams": {"policy_kwargs": {"net_arc": [64]}}}), "stages.0.hyperparams.policy_kwargs.net_arc",
-     "unknown key; allowed: activation_fn, bounded_mean"),
+     "unknown key (did you mean 'net_arch'?); allowed: activation_fn, bounded_mean"),
     (_with({}, {"reward": {"speed": 1}}), "stages.0.reward.speed", "unknown reward term"),
     (_with({}, {"reward": {"proximity": {"weight": -1, "threshold": "fast"}}}), "stages.0.reward.proximity.threshold",
      "got 'fast'; allowed: a finite number (default 0.3)"),
@@ -67,26 +67,34 @@ def test_schema_errors_name_the_field_and_what_is_allowed(data, field, message):
 
 @pytest.mark.parametrize("world, scenarios, file, message", [
     ("flatland", None, "robot: {kinematics: omni}\n",
-     "stages.0.scenarios: scenario: robot.kinematics: a curriculum stage drives a differential drive (v, w), not 'omni'"),
+     "stages.0.scenarios: world.yaml: scenario: robot.kinematics: a curriculum stage drives a differential drive (v, w)"),
     ("physics3d", {"kind": "maze"}, None,
      "stages.0.scenarios: maze-train-0: grid_map: an occupancy grid map is not built in the 3D tier"),
     ("physics3d", None, "grid_map: {image: map.png}\n",
-     "stages.0.scenarios: scenario: grid_map: an occupancy grid map is not built in the 3D tier"),
+     "stages.0.scenarios: world.yaml: scenario: grid_map: an occupancy grid map is not built in the 3D tier"),
     ("physics3d", {"mix": {"sparse": 1, "maze": 1}}, None, "maze-train-0: grid_map: an occupancy grid map is not built"),
     ("physics3d", None, "robot: {kinematics: omni}\n",
-     "stages.0.scenarios: scenario: robot.kinematics: the 3D robot is a differential drive, not 'omni'"),
-    ("flatland", {"suite": "crowd_unaware"}, None, "stages.0.scenarios: world: 'crowd_unaware' is neither a scenario kind"),
-    ("flatland", None, "MOVERS_ON_A_MAZE", "stages.0.scenarios: maze-train-0: grid_map: movers on a grid map are not modelled"),
+     "stages.0.scenarios: world.yaml: scenario: robot.kinematics: the 3D robot is a differential drive, not 'omni'"),
+    ("flatland", {"suite": "crowd_unaware"}, None, "stages.0.scenarios: an eval-only suite 'crowd_unaware'; allowed: open, "),
+    ("flatland", None, "MOVERS_ON_A_MAZE",
+     "stages.0.scenarios: world.yaml: maze-train-0: grid_map: movers on a grid map are not modelled"),
+    # The stage's robot is fine: the file's is what the 3D tier cannot build.
+    ("physics3d", None, "OMNI_UNDER_THE_3D_ROBOT", "stages.0.scenarios: world.yaml: scenario: robot.kinematics: the 3D robot"),
+    ("flatland", None, "A_CURRICULUM", "stages.0.scenarios: world.yaml: is a curriculum (it has stages)"),
 ])
 def test_a_stage_whose_worlds_its_tier_or_its_policy_cannot_drive_is_refused(world, scenarios, file, message, tmp_path):
     """The worlds a stage's env would draw are checked as it validates, not when training starts."""
     from PIL import Image
 
     Image.new("L", (20, 20), 255).save(tmp_path / "map.png")
+    special = {"MOVERS_ON_A_MAZE": _movers_on_a_maze, "OMNI_UNDER_THE_3D_ROBOT": lambda: "robot: {kinematics: omni}\n",
+               "A_CURRICULUM": lambda: yaml.safe_dump(_tiny())}
     if file is not None:
-        (tmp_path / "world.yaml").write_text(_movers_on_a_maze() if file == "MOVERS_ON_A_MAZE" else file)
+        (tmp_path / "world.yaml").write_text(special[file]() if file in special else file)
         scenarios = {"file": "world.yaml"}
-    data = _with({}, {"world": world, "scenarios": scenarios, "normalize": False, "observation": "lidar43"})
+    env_kwargs = {"robot": "physics3d" if file == "OMNI_UNDER_THE_3D_ROBOT" else {"radius": 0.2}} if file in special else {}
+    data = _with({}, {"world": world, "scenarios": scenarios, "normalize": False, "observation": "lidar43",
+                      "env_kwargs": env_kwargs})
     path = tmp_path / "c.yaml"
     with pytest.raises(ConfigError) as error:
         curriculum_from_mapping(data, path)
@@ -105,7 +113,7 @@ def _movers_on_a_maze() -> str:
 @pytest.mark.parametrize("env_kwargs, message", [
     ({"robot": {"radius": 0.2, "motion_noise": [0.01, 0.01, 0.01, 0.01]}, "world": "physics3d"},
      "stages.0.env_kwargs.robot.motion_noise: IR-SIM's kinematic stand-in is not modelled in the 3D tier"),
-    ({"robot_family": True}, "stages.0.scenarios: robot_family: robots drawn per episode need worlds generated"),
+    ({"robot_family": True}, "stages.0.scenarios: world.yaml: robot_family: robots drawn per episode need worlds generated"),
 ])
 def test_a_stage_whose_conditions_its_worlds_cannot_take_names_the_knob(env_kwargs, message, tmp_path):
     (tmp_path / "world.yaml").write_text("name: w\n")

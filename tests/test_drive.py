@@ -220,6 +220,10 @@ def test_controllers_policies_curricula_and_the_3d_tier_refuse_another_drive_in_
         World(Scenario(robot=compound))
     with pytest.raises(ConfigError, match="robot.shape: a compound robot among movers is not modelled"):
         FlatWorld(generate("crowd", 1, 0.5).model_copy(update={"robot": compound}))
+    from common.motion.spec import Motion
+    with pytest.raises(ConfigError, match="robot.shape: a compound robot among movers is not modelled"):
+        # The robot's own IR-SIM behaviour alone makes it a mover among movers.
+        FlatWorld(Scenario(robot=compound, robot_motion=Motion(goals=[(8.0, 8.0)], role="robot")))
     curriculum = yaml.safe_load((Path(__file__).resolve().parents[1] / "curricula" / "stage1_2d.yaml").read_text())
     curriculum["stages"][0]["env_kwargs"]["robot"] = {"kinematics": "omni"}
     path = tmp_path / "omni.yaml"

@@ -71,7 +71,8 @@ def test_wilson_interval_known_values():
     lo, hi = wilson_interval(10, 20)
     assert lo == pytest.approx(0.2993, abs=1e-3) and hi == pytest.approx(0.7007, abs=1e-3)
     assert wilson_interval(20, 20)[1] == 1.0 and wilson_interval(20, 20)[0] == pytest.approx(0.8389, abs=1e-3)
-    for n in (1, 7, 50, 200, 1000):  # exactly 0 at no successes (the arithmetic alone leaves 5.6e-17 at n=1)
+    # Exactly 0 at no successes and 1 at all (the arithmetic alone leaves 5.6e-17 at n=1, 1 - 1.1e-16 at n=10).
+    for n in (1, 7, 10, 50, 200, 1000):
         assert wilson_interval(0, n)[0] == 0.0 and wilson_interval(n, n)[1] == 1.0
 
 

@@ -180,7 +180,7 @@ def test_a_pickle_in_place_of_weights_is_refused_without_running(untrained_polic
     (lambda m: m.update(policy_kwargs={"activation_fn": "os.system"}), "activation_fn"),
     (lambda m: m.update(tier="mars"), "nav_manifest.json: tier: Input should be 'flatland' or 'physics3d'"),
     (lambda m: m.update(policy_kwargs={"net_arc": [32]}),
-     "nav_manifest.json: policy_kwargs.net_arc: unknown key; allowed: activation_fn, bounded_mean"),
+     "nav_manifest.json: policy_kwargs.net_arc: unknown key (did you mean 'net_arch'?); allowed: activation_fn"),
 ])
 def test_an_inconsistent_manifest_is_a_one_line_refusal(untrained_policy, tmp_path, capsys, change, expected):
     manifest = json.loads(zipfile.ZipFile(untrained_policy).read("nav_manifest.json"))

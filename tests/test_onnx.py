@@ -150,7 +150,7 @@ def _manifest_with(**change):
     ("another layout", lambda source, target: _rewritten(source, target, _manifest_with(observation="nav7")),
      "graph observation", "expected one float tensor 'observation' of (batch, 7)"),
     ("unknown policy key", lambda source, target: _rewritten(source, target, _manifest_with(policy_kwargs={"net_arc": [8]})),
-     "nav_manifest: policy_kwargs.net_arc", "unknown key; allowed: activation_fn, bounded_mean"),
+     "nav_manifest: policy_kwargs.net_arc", "unknown key (did you mean 'net_arch'?); allowed: activation_fn"),
 ])
 def test_a_damaged_or_mismatched_onnx_file_is_refused_in_one_line(exported, tmp_path, case, make, field, problem):
     from common.curriculum.onnx_policy import OnnxPolicy

@@ -91,11 +91,11 @@ def test_a_robot_on_the_command_line_drives_instead_of_a_policys_family_and_the_
 
     from common.curriculum.cli import _conditions
 
-    family_policy = SimpleNamespace(env_kwargs={"robot_family": True, "lidar_beams": 360})
+    family_policy = SimpleNamespace(trained_conditions={"robot_family": True, "lidar_beams": 360})
     args = SimpleNamespace(env_kwargs=[("robot", "physics3d")], world="flatland")
     given = _conditions(args, [family_policy]).given()
     assert given["robot"] == "physics3d" and "robot_family" not in given and given["lidar_beams"] == 360
-    one_robot_policy = SimpleNamespace(env_kwargs={"robot": "physics3d"})
+    one_robot_policy = SimpleNamespace(trained_conditions={"robot": "physics3d"})
     args = SimpleNamespace(env_kwargs=[("robot_family", True)], world="flatland")
     given = _conditions(args, [one_robot_policy]).given()
     assert "robot" not in given and given["robot_family"]["shapes"] == ["circle", "box"]

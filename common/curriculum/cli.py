@@ -45,12 +45,15 @@ def _validated(path: str) -> str:
         warnings.simplefilter("always", ScenarioWarning)
         if is_curriculum(data):
             config = curriculum_from_mapping(data, path)
-            line = f"ok: {path}: curriculum {config.name!r}, {len(config.stages)} stages"
+            line = f"ok: {path}: curriculum {config.name!r}, {_counted(len(config.stages), 'stage')}"
         else:
             scenario = WorldFile(path).initial
-            line = f"ok: {path}: scenario {scenario.name!r}, {len(scenario.obstacles)} obstacles"
+            line = f"ok: {path}: scenario {scenario.name!r}, {_counted(len(scenario.obstacles), 'obstacle')}"
     for warning in caught:
-        print(f"warning: {warning.message}", file=sys.stderr)
+        if issubclass(warning.category, ScenarioWarning):
+            print(f"warning: {warning.message}", file=sys.stderr)
+        else:  # a library's own warning, as it would have shown
+            warnings.warn_explicit(warning.message, warning.category, warning.filename, warning.lineno)
     return line
 
 
@@ -209,8 +212,9 @@ def _settle(args: argparse.Namespace, agents) -> None:
         args.episodes = episodes if args.episodes is None else args.episodes
 
 
-def _episodes(count: int) -> str:
-    return f"{count} episode" if count == 1 else f"{count} episodes"
+def _counted(count: int, noun: str) -> str:
+    """``count`` of ``noun`` (a regular plural): "1 episode", "2 stages"."""
+    return f"{count} {noun}" if count == 1 else f"{count} {noun}s"
 
 
 def _announce(args: argparse.Namespace, agents: str, episodes: int, radius: float | None, conditions) -> None:
@@ -218,7 +222,7 @@ def _announce(args: argparse.Namespace, agents: str, episodes: int, radius: floa
     source = args.scenario_file or f"suite {args.suite}"
     judged = f"within {radius:g} m of the goal" if radius is not None else "within each scenario's goal radius"
     knobs = ", ".join(f"{k}={v}" for k, v in conditions.for_tier(args.world).given().items()) or "ideal"
-    print(f"{agents}: {args.world}, {source}, {_episodes(episodes)} from seed {args.seed}, judged {judged}; "
+    print(f"{agents}: {args.world}, {source}, {_counted(episodes, 'episode')} from seed {args.seed}, judged {judged}; "
           f"conditions: {knobs}", file=sys.stderr)
 
 
@@ -284,7 +288,7 @@ def _compare(args: argparse.Namespace) -> int:
         summaries = evaluate(agents, scenarios, args.world, seed=args.seed, max_steps=args.max_steps,
                              conditions=conditions, goal_radius=radius, progress=lambda n: bar.advance(task, n))
     judged = f"{radius:g} m" if radius is not None else "each scenario's radius"
-    title = f"{args.world} / {source}: {_episodes(len(scenarios))} from seed {args.seed}, judged within {judged}"
+    title = f"{args.world} / {source}: {_counted(len(scenarios), 'episode')} from seed {args.seed}, judged within {judged}"
     table = markdown_table(summaries, title)
     (out / "comparison.md").write_text(table)
     write_csv(summaries, out / "episodes.csv")

@@ -66,8 +66,7 @@ def git_commit() -> str | None:
 
 def _make_env_kwargs(stage: StageSpec) -> dict:
     spec = stage.scenarios
-    world = spec.kind or spec.mix or spec.suite or spec.file
-    return dict(world=world, observation=stage.observation, reward=stage.reward, max_steps=stage.max_steps,
+    return dict(world=spec.world, observation=stage.observation, reward=stage.reward, max_steps=stage.max_steps,
                 difficulty=spec.difficulty, action_mapping=stage.action_mapping, **stage.env_kwargs)
 
 

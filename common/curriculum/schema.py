@@ -43,9 +43,8 @@ from common.generators import KINDS, SUITES
 from common.observations import LAYOUTS
 from common.rewards import resolve_reward_spec
 from common.scenario import pydantic_error
-from common.sources import scenario_source
 from common.task import MAX_STEPS
-from common.tiers import TIERS, generator_template
+from common.tiers import TIERS
 from common.yaml_io import read_yaml_mapping
 
 
@@ -63,13 +62,21 @@ class ScenarioSpec(_Strict):
     suite: str | None = None
     file: str | None = None
 
+    @property
+    def world(self) -> str | dict[str, float]:
+        """What a stage's env is given as its ``world``: the kind, mix, suite (its kind's training
+        split) or file."""
+        return self.kind or self.mix or self.suite or self.file  # type: ignore[return-value]
+
     @model_validator(mode="after")
     def _exactly_one(self) -> "ScenarioSpec":
         given = [k for k in ("kind", "mix", "suite", "file") if getattr(self, k) is not None]
         if len(given) != 1:
             raise ValueError(f"give exactly one of kind, mix, suite or file (got {', '.join(given) or 'none'})")
-        if self.suite is not None and self.suite not in SUITES:
-            raise ValueError(f"unknown suite {quote(self.suite)}; allowed: {', '.join(SUITES)}")
+        if self.suite is not None and self.suite not in KINDS:
+            # A suite trains on its kind's training split; the *_unaware suites are eval-only.
+            unknown = "an eval-only suite" if self.suite in SUITES else "unknown suite"
+            raise ValueError(f"{unknown} {quote(self.suite)}; allowed: {', '.join(KINDS)}")
         return self
 
 
@@ -173,30 +180,39 @@ def _check_worlds(stage: StageSpec, source: str | Path, field: str) -> None:
     (one of each kind, or its file's) checked in the order a world checks it: what the tier cannot
     build as written, then under the stage's conditions what its movers cannot, and the drive (a
     stage's policy file holds a (v, w) actor), whichever the robot came from."""
-    from common.tiers import as_built
+    from common.tiers import as_built, refuse_as_written, tier_source
 
-    spec, template = stage.scenarios, generator_template(stage.world)
+    spec = stage.scenarios
     conditions = conditions_of(stage.env_kwargs, source, field).for_tier(stage.world)
-    if conditions.profile is not None:  # the env's generators draw around the robot it drives
-        template = template.model_copy(update={"robot": conditions.profile})
-    world = spec.kind or spec.mix or spec.suite or spec.file  # what the runner hands the env
     try:
-        drawn = scenario_source(world, spec.difficulty, template, family=conditions.robot_family)
+        drawn = tier_source(stage.world, spec.world, spec.difficulty, conditions)
     except ConfigError as error:
-        raise _world_error(stage, source, field, error) from None
+        # A world file's own problems are the file's; a kind's are the robot's it was drawn for.
+        raise _world_error(stage, source, field, error, stage_robot=error.source is None) from None
     for raw in drawn.examples:
+        try:
+            refuse_as_written(stage.world, raw)
+        except ConfigError as error:
+            # Generated worlds are drawn around the stage's robot; a file's robot is the file's.
+            raise _world_error(stage, source, field, error, raw.name, stage_robot=spec.file is None) from None
         try:
             refuse_other_drives(as_built(stage.world, raw, conditions).robot, "a curriculum stage")
         except ConfigError as error:
             raise _world_error(stage, source, field, error, raw.name) from None
 
 
-def _world_error(stage: StageSpec, source: str | Path, field: str, error: ConfigError, world: str | None = None) -> ConfigError:
-    """A problem of a stage's worlds, named where the stage set it: its own robot (``env_kwargs``),
-    else its scenarios (and the world that showed it)."""
-    if "robot" in stage.env_kwargs and error.field.startswith("robot"):
+def _world_error(stage: StageSpec, source: str | Path, field: str, error: ConfigError, world: str | None = None,
+                 stage_robot: bool = True) -> ConfigError:
+    """A problem of a stage's worlds, named where the stage set it: its own robot (``env_kwargs``)
+    where that robot drives (``stage_robot``), else its scenarios, with the world file and the
+    world that showed it."""
+    if stage_robot and "robot" in stage.env_kwargs and (error.field or "").startswith("robot"):
         return ConfigError(source, f"{field}.env_kwargs.{error.field}", error.problem)
-    return ConfigError(source, f"{field}.scenarios", f"{world + ': ' if world else ''}{error.field}: {error.problem}")
+    file = error.source or stage.scenarios.file
+    if file is not None and source is not None and Path(file).is_relative_to(Path(source).parent):
+        file = Path(file).relative_to(Path(source).parent)  # as the curriculum names it
+    where = [str(file or ""), world or "", error.field or ""]
+    return ConfigError(source, f"{field}.scenarios", ": ".join([part for part in where if part] + [error.problem]))
 
 
 def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:

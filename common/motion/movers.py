@@ -50,8 +50,9 @@ class MoverStates(NamedTuple):
 
 
 def refuse_unmodelled(scenario: Scenario) -> None:
-    """A one-line error for movers this project's motion code cannot model (IR-SIM itself runs them)."""
-    if not scenario.movers:
+    """A one-line error for movers this project's motion code cannot model (IR-SIM itself runs them);
+    the robot's own IR-SIM behaviour counts, as flatland tracks it among them."""
+    if not scenario.movers and scenario.robot_motion is None:
         return
     robot = scenario.robot
     if robot.shape in ("polygon", "compound"):
