@@ -46,7 +46,7 @@ class PolicyAgent:
         given = self.env_kwargs
         if self.tier == "physics3d" and given.get("robot") is None and not given.get("robot_family"):
             return {**given, "robot": "physics3d"}
-        return self.env_kwargs
+        return given
 
     def bind(self, robot: RobotProfile, lidar: LidarSpec, goal_threshold: float = 0.3) -> None:
         # Policy files hold a two-number (v, w) actor: they train and drive differential drives.

@@ -9,7 +9,7 @@ initial state is restored, as IR-SIM's ``reset()`` does. Generator kinds draw an
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Mapping, Protocol, Sequence
+from typing import Mapping, Protocol, Sequence, Union
 
 import numpy as np
 
@@ -105,6 +105,10 @@ class FileSource:
         return self.file.initial
 
 
+WorldArgument = Union[Scenario, str, Path, Sequence[Scenario], Mapping[str, float], ScenarioSource]
+"""What an env takes as its ``world`` (:func:`scenario_source` says how each is read)."""
+
+
 def _kind_source(kind: str, difficulty: float, template: Scenario | None,
                  family: RobotFamily | None = None) -> GeneratorSource:
     if kind not in KINDS:
@@ -113,9 +117,8 @@ def _kind_source(kind: str, difficulty: float, template: Scenario | None,
     return GeneratorSource(kind, 1.0 if kind == "warehouse" else difficulty, template, family)
 
 
-def scenario_source(world: Scenario | str | Path | Sequence[Scenario] | Mapping[str, float] | ScenarioSource,
-                    difficulty: float = 0.5, template: Scenario | None = None, resample: bool = False,
-                    family: RobotFamily | None = None) -> ScenarioSource:
+def scenario_source(world: WorldArgument, difficulty: float = 0.5, template: Scenario | None = None,
+                    resample: bool = False, family: RobotFamily | None = None) -> ScenarioSource:
     """Interpret an env's ``world`` argument: a Scenario, a list of them, a generator kind or suite
     name (``open``, ``sparse``, ``cluttered``, ``warehouse``, ``trap``), a mapping of kinds to
     weights (a mix), or a YAML path (``resample``: a random file's layout is redrawn every episode).

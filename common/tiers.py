@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import importlib
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from common.conditions import Conditions
 from common.errors import ConfigError, quote
 from common.readings import Readings
 from common.scenario import Scenario
+
+if TYPE_CHECKING:  # common.sources imports the generators, which most users of this module never need
+    from common.sources import ScenarioSource, WorldArgument
 
 
 class WorldLike(Protocol):
@@ -57,8 +60,8 @@ def generator_template(tier: str) -> Scenario:
     return template() if isinstance(template, type) else template
 
 
-def tier_source(tier: str, world, difficulty: float, conditions: Conditions, template: Scenario | None = None,
-                resample: bool = False):
+def tier_source(tier: str, world: WorldArgument, difficulty: float, conditions: Conditions,
+                template: Scenario | None = None, resample: bool = False) -> ScenarioSource:
     """The :class:`~common.sources.ScenarioSource` an env of ``tier`` draws ``world`` from under
     ``conditions`` (:func:`~common.sources.scenario_source` takes the same ``world``); generated
     scenarios are drawn around the robot the conditions put in, so their gaps fit it."""

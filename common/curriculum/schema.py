@@ -34,7 +34,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from common.actions import MAPPINGS
-from common.conditions import CONDITION_KEYS, ONLY_2D, ONLY_3D, conditions_of
+from common.conditions import CONDITION_KEYS, ONLY_2D, ONLY_3D, Conditions, conditions_of
 from common.curriculum.hyperparams import policy_kwargs_from_yaml, resolve_hyperparams
 from common.curriculum.policy_file import ALGORITHMS
 from common.drive import refuse_other_drives
@@ -154,15 +154,16 @@ _MANAGED = {"policy", "env", "seed", "device", "verbose", "tensorboard_log", "_i
 TASK_OPTIONS = {"flatland": ("goal_threshold", "resample"), "physics3d": ("goal_threshold", "resample", "camera")}
 
 
-def _check_env_kwargs(stage: StageSpec, source: str | Path, field: str) -> None:
-    """Every key a condition of the stage's tier or one of its task options, every value valid."""
+def _check_env_kwargs(stage: StageSpec, source: str | Path, field: str) -> Conditions:
+    """Every key a condition of the stage's tier or one of its task options, every value valid;
+    the stage's conditions, as its tier fills them in."""
     other_tier = ONLY_3D if stage.world == "flatland" else ONLY_2D
     allowed = sorted((*(k for k in CONDITION_KEYS if k not in other_tier), *TASK_OPTIONS[stage.world]))
     for key in stage.env_kwargs:
         if key not in allowed:
             raise ConfigError(source, f"{field}.{key}", f"not a {stage.world} env argument; allowed: {', '.join(allowed)}")
     try:
-        conditions_of(stage.env_kwargs, source, field).for_tier(stage.world)  # its robot: _check_worlds
+        conditions = conditions_of(stage.env_kwargs, source, field).for_tier(stage.world)
         if "goal_threshold" in stage.env_kwargs:
             from common.task import threshold_range
 
@@ -171,19 +172,19 @@ def _check_env_kwargs(stage: StageSpec, source: str | Path, field: str) -> None:
         raise ConfigError(source, error.field if error.source else f"{field}.{error.field}", error.problem) from None
     if "resample" in stage.env_kwargs and not isinstance(stage.env_kwargs["resample"], bool):
         raise ConfigError(source, f"{field}.resample", f"got {quote(stage.env_kwargs['resample'])}; allowed: true or false")
+    return conditions
 
 
-def _check_worlds(stage: StageSpec, source: str | Path, field: str) -> None:
-    """The stage's worlds as its env gets them: its scenario source built from the same argument
-    (so refused where the env would refuse it: a robot too wide for a kind's layouts, a suite that
-    is no generator kind, robots drawn per episode on a file), then each world the source made
-    (one of each kind, or its file's) checked in the order a world checks it: what the tier cannot
-    build as written, then under the stage's conditions what its movers cannot, and the drive (a
-    stage's policy file holds a (v, w) actor), whichever the robot came from."""
+def _check_worlds(stage: StageSpec, conditions: Conditions, source: str | Path, field: str) -> None:
+    """The stage's worlds (and so its robot) as its env gets them under ``conditions``: its
+    scenario source built from the same argument (so refused where the env would refuse it: a
+    robot too wide for a kind's layouts, robots drawn per episode on a file), then each world the
+    source made (one of each kind, or its file's) checked in the order a world checks it: what the
+    tier cannot build as written, then under the stage's conditions what its movers cannot, and
+    the drive (a stage's policy file holds a (v, w) actor), whichever the robot came from."""
     from common.tiers import as_built, refuse_as_written, tier_source
 
     spec = stage.scenarios
-    conditions = conditions_of(stage.env_kwargs, source, field).for_tier(stage.world)
     try:
         drawn = tier_source(stage.world, spec.world, spec.difficulty, conditions)
     except ConfigError as error:
@@ -235,14 +236,14 @@ def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
         if refusal := kwargs.refused_by(stage.algorithm):
             raise ConfigError(source, f"{field}.hyperparams.policy_kwargs.{refusal[0]}",
                               f"{refusal[1]} (this stage's: {stage.algorithm})")
-    _check_env_kwargs(stage, source, f"{field}.env_kwargs")
+    conditions = _check_env_kwargs(stage, source, f"{field}.env_kwargs")
     if stage.init_from == "previous" and index == 0:
         raise ConfigError(source, f"{field}.init_from", "the first stage has no previous stage; allowed: null or a policy path")
     if stage.init_from not in (None, "previous") and not Path(stage.init_from).is_file():
         raise ConfigError(source, f"{field}.init_from", f"no policy file {quote(stage.init_from)}; allowed: null, previous or a .zip path")
     if stage.scenarios.file is not None and not Path(stage.scenarios.file).is_file():
         raise ConfigError(source, f"{field}.scenarios.file", f"no such file {quote(stage.scenarios.file)}")
-    _check_worlds(stage, source, field)
+    _check_worlds(stage, conditions, source, field)
 
 
 def curriculum_from_mapping(data: dict, source: str | Path | None = None) -> CurriculumConfig:

@@ -67,6 +67,7 @@ class Movers:
     behaviour if it has one: tracked for its group and its draws, never driving it)."""
 
     def __init__(self, scenario: Scenario) -> None:
+        refuse_unmodelled(scenario)
         self.scenario = scenario
         self.table: MoverTable = mover_table(scenario)
         t = self.table
@@ -89,7 +90,6 @@ class Movers:
         self._initial_objects = t.objects.copy()
         self._states = np.empty((self.count, 8))
         self._circle_rows, self._box_rows = np.empty((len(self._circles), 3)), np.empty((len(self._boxes), 6))
-        refuse_unmodelled(scenario)
         robot = scenario.robot
         # The robot's body for contacts: shape, x, y, heading, radius, length, width, and how far
         # ahead of its pose the footprint's centre is.
