@@ -143,6 +143,7 @@ def test_bench_json_has_the_agreed_keys(capsys, monkeypatch, tmp_path):
     assert results["reset_ms_maze"] > 0 and results["reset_ms_passages"] > 0
     for algorithm in ("ppo", "sac"):
         assert results[f"onnx_actions_per_s_{algorithm}"] > 0 and results[f"onnx_vs_torch_{algorithm}"] > 0
+        assert results[f"agent_actions_per_s_{algorithm}"] > 0 and results[f"agent_vs_torch_{algorithm}"] > 0
 
 
 def test_bench_takes_the_faster_of_two_alternated_ppo_runs_of_each_setting(monkeypatch):

@@ -17,7 +17,7 @@ from stable_baselines3 import PPO, SAC
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
 import flatland  # noqa: F401
-from common.curriculum.policy import load_policy, load_weights
+from common.curriculum.policy import build_policy, load_policy, load_weights
 from common.curriculum.policy_file import NORMALIZER, Normalizer, PolicyFile, save_policy
 from common.errors import ConfigError
 
@@ -230,11 +230,12 @@ def test_a_curriculum_refuses_policy_kwargs_its_algorithm_does_not_take(algorith
     assert str(error.value) == f"c.yaml: stages.0.hyperparams.policy_kwargs.{problem}"
 
 
-@pytest.mark.parametrize("name", ["stage1_2d_ppo", "curriculum_2d_ppo", "stage1_2d_sac"])
+@pytest.mark.parametrize("name", ["stage1_2d_ppo", "curriculum_2d_ppo", "stage1_2d_sac", "stage1_2d_td3"])
 def test_a_loaded_policy_acts_as_predict_does_for_every_observation(name):
-    # The agent's own deterministic action skips stable-baselines3's per-call bookkeeping; it must
-    # give predict's action to the bit: PPO's clipped into the bounds (curriculum_2d_ppo's mean is
-    # not bounded), SAC's unscaled from its squashed output, and predict's own in training mode.
+    # The agent's own deterministic action skips stable-baselines3's per-call bookkeeping and the
+    # action distribution; it must give predict's action to the bit: PPO's mean through tanh
+    # (stage1_2d_ppo's is bounded) or clipped into the bounds (curriculum_2d_ppo's is not), SAC's
+    # unscaled from its squashed mean, TD3's actor, and predict's own in training mode.
     agent = load_policy(Path(__file__).resolve().parents[1] / "curricula" / "policies" / f"{name}.zip")
     observations = np.random.default_rng(0).uniform(-3.0, 3.0, (500, agent.model.observation_space.shape[0]))
     observations = observations.astype(np.float32)
@@ -242,3 +243,19 @@ def test_a_loaded_policy_acts_as_predict_does_for_every_observation(name):
         assert np.array_equal(agent.predict(observation), agent.model.predict(observation, deterministic=True)[0])
     agent.model.set_training_mode(True)
     assert np.array_equal(agent.predict(observations[0]), agent.model.predict(observations[0], deterministic=True)[0])
+
+
+@pytest.mark.parametrize("algorithm", ["ppo", "sac"])
+def test_a_gsde_policy_acts_through_predict_s_own_path(algorithm):
+    # The policies the agent reads no mean layer from (gSDE's) act as predict does too.
+    from common.curriculum.policy import DeterministicAction
+    from common.curriculum.policy_file import Manifest
+
+    manifest = Manifest.model_validate({"format": 2, "algorithm": algorithm, "observation": "lidar43_log",
+                                        "goal_distance_scale": 10.0, "use_sde": True})
+    policy = build_policy(manifest)
+    policy.set_training_mode(False)
+    observations = np.random.default_rng(1).uniform(-3.0, 3.0, (50, policy.observation_space.shape[0]))
+    act = DeterministicAction(policy)
+    for observation in observations.astype(np.float32):
+        assert np.array_equal(act(observation), policy.predict(observation, deterministic=True)[0])

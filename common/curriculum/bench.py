@@ -440,9 +440,20 @@ def movers3d_figures(steps: int) -> dict[str, Any]:
 SHIPPED_POLICIES = Path(__file__).resolve().parents[2] / "curricula" / "policies"
 
 
+def _calls_per_s(predict: Callable[[np.ndarray], Any], observations: np.ndarray) -> float:
+    """Calls per second (CPU time) of ``predict`` over ``observations``, one at a time, after a warm-up call."""
+    predict(observations[0])
+    began = cpu_seconds()
+    for observation in observations:
+        predict(observation)
+    return len(observations) / (cpu_seconds() - began)
+
+
 def onnx_figures(calls: int = 20_000, policies: Sequence[str] = ("stage1_2d_ppo", "stage1_2d_sac")) -> dict[str, Any]:
     """Actions per second of a shipped policy exported to ONNX (onnxruntime, one thread), against
-    the same policy's torch network (one thread), one observation per call as a robot's loop asks."""
+    the same policy's torch network (one thread, SB3's ``predict``), one observation per call as a
+    robot's loop asks; and of the loaded policy's own deterministic action (the evaluator's:
+    :class:`common.curriculum.policy.DeterministicAction`), the same network on the same thread."""
     import torch
 
     from common.curriculum.onnx_export import export_onnx
@@ -456,23 +467,23 @@ def onnx_figures(calls: int = 20_000, policies: Sequence[str] = ("stage1_2d_ppo"
         with tempfile.TemporaryDirectory() as folder:
             for name in policies:
                 algorithm = name.rsplit("_", 1)[-1]
+                agent = load_policy(SHIPPED_POLICIES / f"{name}.zip")
+                network = agent.model
+                observations = np.random.default_rng(0).uniform(-1, 1, (calls, network.observation_space.shape[0]))
+                observations = observations.astype(np.float32)
+                torch_rate = _calls_per_s(lambda o: network.predict(o, deterministic=True), observations)
+                agent_rate = _calls_per_s(agent.predict, observations)
+                figures.update({f"torch_actions_per_s_{algorithm}": round(torch_rate, 1),
+                                f"agent_actions_per_s_{algorithm}": round(agent_rate, 1),
+                                f"agent_vs_torch_{algorithm}": round(agent_rate / torch_rate, 2)})
                 try:
                     runtime = OnnxPolicy(export_onnx(SHIPPED_POLICIES / f"{name}.zip", Path(folder) / f"{name}.onnx"))
-                except (ConfigError, ImportError):  # no onnxruntime or onnxscript, or no shipped policies here
+                except (ConfigError, ImportError):  # no onnxruntime or onnxscript
                     figures.update({f"onnx_actions_per_s_{algorithm}": None, f"onnx_vs_torch_{algorithm}": None})
                     continue
-                network = load_policy(SHIPPED_POLICIES / f"{name}.zip").model
-                observations = np.random.default_rng(0).uniform(-1, 1, (calls, runtime.size)).astype(np.float32)
-                rates = []
-                for predict in (runtime.predict, network.predict):
-                    predict(observations[0])  # warm-up
-                    began = cpu_seconds()
-                    for observation in observations:
-                        predict(observation, deterministic=True)
-                    rates.append(calls / (cpu_seconds() - began))
-                figures.update({f"onnx_actions_per_s_{algorithm}": round(rates[0], 1),
-                                f"torch_actions_per_s_{algorithm}": round(rates[1], 1),
-                                f"onnx_vs_torch_{algorithm}": round(rates[0] / rates[1], 2)})
+                onnx_rate = _calls_per_s(lambda o: runtime.predict(o, deterministic=True), observations)
+                figures.update({f"onnx_actions_per_s_{algorithm}": round(onnx_rate, 1),
+                                f"onnx_vs_torch_{algorithm}": round(onnx_rate / torch_rate, 2)})
     finally:
         torch.set_num_threads(threads)
     return figures

@@ -12,7 +12,7 @@ load weights the same way into a model built from the curriculum's own hyperpara
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import torch
@@ -68,25 +68,56 @@ class NavActorCriticPolicy(ActorCriticPolicy):
 
 
 class DeterministicAction:
-    """``policy.predict(observation, deterministic=True)[0]`` for one observation at a time, in about
-    two thirds of the time (the main job's policy: 98 µs a call against 148): the same network calls and the same clipping or unscaling of the action, without
-    stable-baselines3's per-call bookkeeping (every module switched to evaluation mode again, the
-    observation's shape checks). A policy in training mode, or an observation of another shape,
-    goes through ``predict`` itself."""
+    """``policy.predict(observation, deterministic=True)[0]`` for one observation at a time, to the
+    bit, 2.7-3.9 times as fast (``curriculum bench``'s ``agent_vs_torch_ppo`` and ``_sac``): the
+    same layers on the same tensors and the same clipping or unscaling of the action,
+    without stable-baselines3's per-call bookkeeping (every module switched to evaluation mode
+    again, the observation's shape checks) and without the action distribution built only to read
+    its mode, which for these policies is their mean (see :func:`mean_action`). A policy in
+    training mode, or an observation of another shape, goes through ``predict`` itself."""
 
     def __init__(self, policy) -> None:
         self.policy = policy
+        self.device = policy.device  # a property that walks the parameters on every call
+        self.network = mean_action(policy) or (lambda tensor: policy._predict(tensor, deterministic=True))
 
     def __call__(self, observation: np.ndarray) -> np.ndarray:
         policy = self.policy
         if policy.training or observation.shape != policy.observation_space.shape:
             return policy.predict(observation, deterministic=True)[0]
         with torch.no_grad():
-            action = policy._predict(torch.as_tensor(observation, device=policy.device)[None], deterministic=True)
+            action = self.network(torch.as_tensor(observation, device=self.device)[None])
         action = action.cpu().numpy()[0]
         if policy.squash_output:
             return policy.unscale_action(action)
         return np.clip(action, policy.action_space.low, policy.action_space.high)
+
+
+def mean_action(policy) -> Callable[[torch.Tensor], torch.Tensor] | None:
+    """The layers that compute ``policy``'s deterministic action, skipping the distribution built
+    around them: PPO's Gaussian mean (through tanh where ``bounded_mean``), SAC's squashed mean,
+    TD3's actor. None where the mode is not that mean alone (gSDE, another distribution)."""
+    from stable_baselines3.common.distributions import DiagGaussianDistribution
+    from stable_baselines3.common.policies import BaseModel
+    from stable_baselines3.sac.policies import SACPolicy
+    from stable_baselines3.td3.policies import TD3Policy
+
+    if isinstance(policy, ActorCriticPolicy) and type(policy.action_dist) is DiagGaussianDistribution:
+        bounded = getattr(policy, "bounded_mean", False)
+
+        def gaussian_mean(observations: torch.Tensor) -> torch.Tensor:
+            features = BaseModel.extract_features(policy, observations, policy.pi_features_extractor)
+            mean = policy.action_net(policy.mlp_extractor.forward_actor(features))
+            return torch.tanh(mean) if bounded else mean
+
+        return gaussian_mean
+    if isinstance(policy, SACPolicy) and not policy.actor.use_sde:
+        actor = policy.actor
+        return lambda observations: torch.tanh(actor.mu(actor.latent_pi(
+            actor.extract_features(observations, actor.features_extractor))))
+    if isinstance(policy, TD3Policy):
+        return policy.actor
+    return None
 
 
 def vec_env_class(name: str):
