@@ -137,19 +137,20 @@ def sector_bounds(beams: int, sectors: int) -> np.ndarray:
 
 
 @kernel
-def _encode(out, pose, goal, scale, v, w, yaw_rate, ranges, bounds, inv_range, floor, log_scale, low, high):
-    """Fill ``out``: the goal terms from the odometry ``pose`` (x, y, heading, distance scaled by
-    ``scale``: :func:`goal_terms`) at 0-2 and last, v
-    and w at 3-4, the yaw rate at 5 where the sectors start at 6, then each sector's nearest return,
+def _encode(out, x, y, yaw, goal_x, goal_y, scale, v, w, yaw_rate, ranges, bounds, inv_range, floor, log_scale,
+            low, high):
+    """Fill ``out``: the goal terms (:func:`goal_terms`: from the odometry pose ``x, y, yaw`` to the
+    goal, the distance scaled by ``scale``) at 0-2 and last, v and w at 3-4, the yaw rate at 5 where the sectors start at 6, then each sector's nearest return,
     linear (r / range_max) or, with ``log_scale`` > 0, log(max(r, floor) / floor) * log_scale; then
     clip all of ``out`` into [low, high]. One compiled call: element writes from Python cost more than
-    the sectors. The rounding follows the NumPy code it replaced (log in float64, the scale in
+    the sectors, and the pose and goal come as floats because a tuple argument costs the call
+    more than a float each. The rounding follows the NumPy code it replaced (log in float64, the scale in
     float32), identical where the C library's log and NumPy's agree (on this project's machine,
     on a million values; NumPy's own SIMD log on AVX-512 may differ in the last bit). Unlike
     np.minimum/maximum, the clip does not pass NaN through: no lidar here returns one."""
     n = out.shape[0]
     first = n - 1 - bounds.shape[0]
-    out[0], out[1], out[2], out[n - 1] = goal_terms(pose[0], pose[1], pose[2], goal[0], goal[1], scale)
+    out[0], out[1], out[2], out[n - 1] = goal_terms(x, y, yaw, goal_x, goal_y, scale)
     out[3], out[4] = v, w
     if first > 5:
         out[5] = yaw_rate
@@ -180,7 +181,8 @@ def make_layout(
         def compute(readings: Readings, goal: tuple[float, float]) -> np.ndarray:
             out = np.empty(7, dtype=np.float32)
             odometry = readings.odometry
-            _encode(out, odometry.pose, goal, goal_distance_scale, odometry.v * inv_v, odometry.w * inv_w, 0.0,
+            x, y, yaw = odometry.pose
+            _encode(out, x, y, yaw, goal[0], goal[1], goal_distance_scale, odometry.v * inv_v, odometry.w * inv_w, 0.0,
                     readings.lidar, whole_scan, inv_r, 1.0, 0.0, low, high)
             return out
 
@@ -210,7 +212,8 @@ def _sector_layout(name: str, robot: RobotProfile, lidar: LidarSpec, goal_distan
         out = np.empty(43, dtype=np.float32)
         odometry = readings.odometry
         ranges = readings.lidar if shift is None else readings.lidar + shift
-        _encode(out, odometry.pose, goal, goal_distance_scale, odometry.v * inv_v, odometry.w * inv_w,
+        x, y, yaw = odometry.pose
+        _encode(out, x, y, yaw, goal[0], goal[1], goal_distance_scale, odometry.v * inv_v, odometry.w * inv_w,
                 readings.imu.angular_velocity[2] * inv_w, ranges, bounds, inv_range, floor, log_scale, low, high)
         return out
 
