@@ -16,7 +16,10 @@ from __future__ import annotations
 
 import contextlib
 import math
+import multiprocessing
+import sys
 import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
 from typing import Callable, Iterable, Protocol, Sequence
 
@@ -270,21 +273,85 @@ def evaluate(
     progress: Callable[[int], None] | None = None,
     conditions: Conditions | None = None,
     goal_radius: float | None = None,
+    jobs: int = 1,
 ) -> list[Summary]:
     """Every agent on the same scenarios with the same seeds (episode i uses ``seed + i``) under the
     same ``conditions``, judged within ``goal_radius`` (default each scenario's own); ``max_steps``
-    defaults to each agent's own (see :func:`episode_limit`)."""
+    defaults to each agent's own (see :func:`episode_limit`). ``jobs`` > 1 runs the episodes in
+    that many worker processes (see :func:`_in_processes`): the same episodes, the same figures."""
     resolved = (conditions or Conditions()).for_tier(tier)
     scenarios = [resolved.scenario(s) for s in scenarios]
     shortest = [shortest_path_length(s, goal_radius) for s in scenarios]
-    results: dict[str, list[Episode]] = {a.name: [] for a in agents}
-    for agent in agents:
-        for i, (scenario, best) in enumerate(zip(scenarios, shortest)):
-            results[agent.name].append(run_episode(agent, scenario, tier, seed + i, max_steps, shortest=best,
-                                                   conditions=resolved, goal_radius=goal_radius))
+    batch = Batch(scenarios, shortest, tier, seed, max_steps, resolved, goal_radius)
+    if jobs > 1 and len(agents) * len(scenarios) > 1:
+        rows = _in_processes(list(agents), batch, jobs, progress)
+    else:
+        rows = []
+        for agent in agents:
+            episodes = []
+            for i in range(len(scenarios)):
+                episodes += batch.run(agent, i, i + 1)
+                if progress:
+                    progress(1)
+            rows.append(episodes)
+    return [summarise(agent.name, episodes) for agent, episodes in zip(agents, rows)]
+
+
+@dataclass(frozen=True)
+class Batch:
+    """The episodes every agent drives in one :func:`evaluate`: scenario i with seed ``seed + i``."""
+
+    scenarios: list[Scenario]
+    shortest: list[float]
+    tier: str
+    seed: int
+    max_steps: int | None
+    conditions: Conditions
+    goal_radius: float | None
+
+    def run(self, agent: Agent, start: int, stop: int) -> list[Episode]:
+        """Episodes ``start`` to ``stop`` (exclusive) of ``agent``."""
+        return [run_episode(agent, self.scenarios[i], self.tier, self.seed + i, self.max_steps,
+                            shortest=self.shortest[i], conditions=self.conditions, goal_radius=self.goal_radius)
+                for i in range(start, stop)]
+
+
+_WORKER: dict[str, list] = {}  # a worker process's agents, unpickled once when it starts
+
+
+def _start_worker(agents: list) -> None:
+    _WORKER["agents"] = agents
+    torch = sys.modules.get("torch")  # loaded by unpickling a policy
+    if torch is not None:
+        torch.set_num_threads(1)  # a worker per core: more threads each would only contend
+
+
+def _run_chunk(agent: int, batch: Batch, start: int, stop: int) -> list[Episode]:
+    return batch.run(_WORKER["agents"][agent], start, stop)
+
+
+def _in_processes(agents: list, batch: Batch, jobs: int, progress: Callable[[int], None] | None) -> list[list[Episode]]:
+    """Each agent's episodes in chunks over ``jobs`` fresh processes (``spawn``: no thread or
+    simulator state of this process is copied). Every episode builds its own world from its
+    scenario and seed, so it ends as it does in this process; the agents are sent once per worker
+    (a policy loaded from a file is loaded again there, by its path)."""
+    count = len(batch.scenarios)
+    size = max(1, math.ceil(count * len(agents) / (4 * jobs)))  # a few chunks per worker keep them all busy
+    chunks = [(a, start, min(start + size, count)) for a in range(len(agents)) for start in range(0, count, size)]
+    rows: list[list[Episode]] = [[] for _ in agents]
+    done: dict[tuple[int, int], list[Episode]] = {}
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(min(jobs, len(chunks)), mp_context=context, initializer=_start_worker,
+                             initargs=(agents,)) as pool:
+        futures = {pool.submit(_run_chunk, a, batch, start, stop): (a, start) for a, start, stop in chunks}
+        for future in as_completed(futures):
+            episodes = future.result()  # a worker's error is raised here, as it would be in this process
+            done[futures[future]] = episodes
             if progress:
-                progress(1)
-    return [summarise(name, rows) for name, rows in results.items()]
+                progress(len(episodes))
+    for a, start, _ in chunks:
+        rows[a] += done[(a, start)]
+    return rows
 
 
 def episodes_as_dicts(summaries: Sequence[Summary]) -> list[dict]:

@@ -23,14 +23,16 @@ class PolicyAgent:
     It builds its observations with the layout in its manifest, so evaluation in either tier
     sees what the policy saw in training. ``model`` is anything with SB3's ``predict``: a
     policy network or a whole algorithm; ``predict``, if given, computes the same deterministic
-    action faster. ``max_steps`` is the episode length it trained with.
+    action faster. ``max_steps`` is the episode length it trained with. ``reopen``, for a policy
+    opened from a file, is how pickling sends it to another process (see ``__reduce__``).
     """
 
     def __init__(self, model, observation: str, goal_distance_scale: float,
                  normalizer: Callable[[np.ndarray], np.ndarray] | None = None, name: str = "policy",
                  action_mapping: str = "linear", max_steps: int | None = None, env_kwargs: dict | None = None,
                  home: tuple[str, str, int, int] | None = None,
-                 predict: Callable[[np.ndarray], np.ndarray] | None = None, tier: str = "flatland") -> None:
+                 predict: Callable[[np.ndarray], np.ndarray] | None = None, tier: str = "flatland",
+                 reopen: tuple[Callable[..., "PolicyAgent"], tuple] | None = None) -> None:
         self.model, self.observation, self.goal_distance_scale = model, observation, goal_distance_scale
         self.predict = predict  # the deterministic action of one observation, if not model.predict's
         self.normalizer, self.name, self.action_mapping = normalizer, name, action_mapping
@@ -38,6 +40,14 @@ class PolicyAgent:
         self.env_kwargs = dict(env_kwargs or {})  # what it trained with: its conditions are evaluated by default
         self.home = home  # (tier, suite, first seed, episodes) of its own test figure: its evaluation by default
         self.tier = tier  # where it trained last
+        self.reopen = reopen  # (loader, arguments) that open it again from its file, in another process
+
+    def __reduce__(self):
+        # A policy crosses to a worker process as the recipe that opens its file: its network's
+        # runtime (a torch module's faster path, an onnxruntime session) is built there afresh.
+        if self.reopen is None:
+            raise TypeError(f"the policy {self.name!r} was not opened from a file, so no other process can open it")
+        return self.reopen
 
     @property
     def trained_conditions(self) -> dict:

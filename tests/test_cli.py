@@ -286,6 +286,8 @@ def test_render_makes_the_drift_plots_folder(tmp_path, capsys):
     (["render", "--episodes", "3"], "unrecognized arguments: --episodes 3"),
     (["compare", "--controllers", ",,,"], "--controllers: no controller named in ',,,'"),
     (["compare", "--max-steps", "0"], "argument --max-steps: must be from 1"),
+    (["compare", "--jobs", "0"], "argument --jobs: must be from 1"),
+    (["eval", "--policy", "p.zip", "--jobs", "two"], "argument --jobs: expected a whole number, got 'two'"),
     (["eval", "--policy", "p.zip", "--goal-threshold", "-0.1"], "argument --goal-threshold: must be more than 0"),
 ])
 def test_every_bad_argument_names_its_flag(argv, expected, capsys):

@@ -98,3 +98,28 @@ def test_same_scenarios_for_every_agent_and_report_files(tmp_path):
     assert "| direct | 2 | 100% (" in table and "| idle | 2 | 0% (" in table
     assert write_csv(summaries, tmp_path / "e.csv").read_text().count("\n") == 5
     assert bar_chart(summaries, tmp_path / "c.png").stat().st_size > 1000
+
+
+def test_episodes_run_in_worker_processes_end_as_they_do_in_this_one():
+    # Agents cross to the workers pickled (a policy as the recipe that opens its file) and every
+    # episode builds its own world from its scenario and seed: the rows must match, in order.
+    from pathlib import Path
+
+    from common.controllers import make_controller
+    from common.curriculum.policy import load_policy
+    from common.generators import SUITES
+
+    policy = load_policy(Path(__file__).resolve().parents[1] / "curricula" / "policies" / "stage1_2d_ppo.zip")
+    agents = [make_controller("potential_field"), policy]
+    scenarios = list(SUITES["cluttered"].scenarios(count=7, seed=100000))
+    seen: list[int] = []
+    here = evaluate(agents, scenarios, seed=100000, goal_radius=0.1)
+    there = evaluate(agents, scenarios, seed=100000, goal_radius=0.1, jobs=2, progress=seen.append)
+
+    def rows(summaries):
+        return [(s.agent, [(e.agent, e.scenario, e.seed, e.outcome, e.steps, e.path_length) for e in s.rows])
+                for s in summaries]
+
+    assert rows(there) == rows(here)
+    assert len({e.outcome for s in here for e in s.rows}) > 1  # episodes that end differently, so an offset shows
+    assert sum(seen) == 14

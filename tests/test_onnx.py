@@ -179,6 +179,9 @@ def test_the_cli_exports_scores_the_onnx_file_as_the_zip_and_refuses_bad_input_w
     assert scores[0]["episodes"] == 6 and [scores[0][key] for key in exact] == [scores[1][key] for key in exact]
     for key in ("spl", "mean_path_length"):
         assert scores[0][key] == pytest.approx(scores[1][key], rel=1e-5)
+    # Sent to worker processes, the ONNX file is opened again there and scores as here.
+    assert main(["eval", "--policy", str(out), "--suite", "sparse", "--episodes", "6", "--json", "--jobs", "2"]) == 0
+    assert json.loads(capsys.readouterr().out) == scores[1]
     for argv in (["export", str(ROOT / "README.md"), "--onnx", str(tmp_path / "x.onnx")],
                  ["export", str(zip_path), "--onnx", str(tmp_path / "x.zip")],
                  ["eval", "--policy", str(ROOT / "README.md") + ".onnx"]):

@@ -126,7 +126,7 @@ def _eval(args: argparse.Namespace) -> int:
         scenarios = _scenarios(args, conditions=conditions)
         _announce(args, agent.name, len(scenarios), radius, conditions)
         summaries += evaluate([agent], scenarios, args.world, seed=args.seed, max_steps=args.max_steps,
-                              conditions=conditions, goal_radius=radius)
+                              conditions=conditions, goal_radius=radius, jobs=args.jobs)
     if args.json:
         print(json.dumps(summaries[0].to_json() if len(summaries) == 1 else {s.agent: s.to_json() for s in summaries}))
     else:
@@ -286,7 +286,8 @@ def _compare(args: argparse.Namespace) -> int:
     with Progress(transient=True, console=_stderr_console()) as bar:
         task = bar.add_task(f"{source}: {len(agents)} agents x {len(scenarios)} episodes", total=len(agents) * len(scenarios))
         summaries = evaluate(agents, scenarios, args.world, seed=args.seed, max_steps=args.max_steps,
-                             conditions=conditions, goal_radius=radius, progress=lambda n: bar.advance(task, n))
+                             conditions=conditions, goal_radius=radius, progress=lambda n: bar.advance(task, n),
+                             jobs=args.jobs)
     judged = f"{radius:g} m" if radius is not None else "each scenario's radius"
     title = f"{args.world} / {source}: {_counted(len(scenarios), 'episode')} from seed {args.seed}, judged within {judged}"
     table = markdown_table(summaries, title)
@@ -426,6 +427,11 @@ def _add_scenario_source(parser: argparse.ArgumentParser, episodes: int | None) 
                              "over a policy's own (values read as YAML)")
 
 
+def _add_jobs(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--jobs", type=_whole(1, 1024), default=1, metavar="N",
+                        help="worker processes that run the episodes (default 1); every N gives the same figures")
+
+
 def _whole(low: int, high: int) -> Callable[[str], int]:
     """An argparse type: a whole number in [low, high] (argparse names the flag in its message)."""
 
@@ -506,6 +512,7 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument("--json", action="store_true",
                           help="print one JSON object per policy: success_rate, collision_rate, timeout_rate, stuck_rate, "
                                "spl, mean_steps, mean_path_length, episodes, success_ci95 (and social, among movers)")
+    _add_jobs(evaluate)
     evaluate.set_defaults(handler=_eval)
 
     validate = commands.add_parser("validate", help="check curriculum, scenario or IR-SIM world YAML files")
@@ -528,6 +535,7 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument("--out", metavar="DIR", help="output directory (default runs/compare/WORLD-SOURCE)")
     compare.add_argument("--gif", metavar="DIR", help="also record each agent's first episode as DIR/AGENT.gif")
     compare.add_argument("--json", action="store_true", help="print {agent: {success_rate, ...}} as JSON")
+    _add_jobs(compare)
     compare.set_defaults(handler=_compare)
 
     render = commands.add_parser("render", help="record one episode of an agent as a GIF (and an odometry-drift plot)")

@@ -126,7 +126,8 @@ def load_onnx_policy(path: str | Path, name: str | None = None, threads: int = 1
     """A :class:`PolicyAgent` running an exported policy: it observes and acts as the policy zip did."""
     policy = OnnxPolicy(path, threads)
     manifest = policy.manifest
+    name = name or Path(path).stem
     return PolicyAgent(policy, manifest.observation, manifest.goal_distance_scale, None,
-                       name=name or Path(path).stem, action_mapping=manifest.action_mapping,
+                       name=name, action_mapping=manifest.action_mapping,
                        max_steps=manifest.max_steps, env_kwargs=manifest.env_kwargs, home=manifest.home,
-                       tier=manifest.tier)
+                       tier=manifest.tier, reopen=(load_onnx_policy, (str(path), name, threads)))

@@ -251,7 +251,8 @@ def load_policy(path: str | Path | PolicyFile, device: str = "cpu", name: str | 
     return PolicyAgent(policy, manifest.observation, manifest.goal_distance_scale, normalizer, name=str(name),
                        action_mapping=manifest.action_mapping, max_steps=manifest.max_steps,
                        env_kwargs=manifest.env_kwargs, home=manifest.home,
-                       tier=manifest.tier, predict=DeterministicAction(policy))
+                       tier=manifest.tier, predict=DeterministicAction(policy),
+                       reopen=(load_policy, (str(path), device, str(name))))
 
 
 def load_weights(model, path: str | Path, policy_only: bool) -> PolicyFile | None:
