@@ -128,7 +128,7 @@ def test_the_agreement_table_pairs_the_episodes_of_both_worlds(capsys):
     # Two arrived only in flatland, six only in IR-SIM: the exact two-sided test of 2 in 8.
     assert _paired(summary("ssssss" + "cccccc" + "ss"), summary("sssscc" + "ssssss" + "ss")) == "2 / 6 (0.29)"
     policy = str(ROOT / "curricula" / "policies" / "stage1_2d_ppo.zip")
-    assert main(["--episodes", "2", "--suites", "sparse", "--policy", policy]) == 0
+    assert main(["--episodes", "2", "--suites", "sparse", "--policy", policy, "--jobs", "2"]) == 0
     row = capsys.readouterr().out.strip().splitlines()[-1]
     assert row.startswith("| stage1_2d_ppo | sparse | ") and row.count("|") == 8
 

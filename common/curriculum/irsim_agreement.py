@@ -3,7 +3,7 @@ episodes in both worlds, under the same conditions (the policy's own, less the k
 cannot model), judged within its trained radius; success with Wilson intervals, and the
 episodes whose outcomes differ.
 
-    python -m common.curriculum.irsim_agreement [--episodes 200] [--suites sparse,cluttered] [--policy ZIP ...]
+    python -m common.curriculum.irsim_agreement [--episodes 200] [--suites sparse,cluttered] [--policy ZIP ...] [--jobs N]
 
 ``--suites`` takes any suite, and ``crowd_sfm`` and ``crowd_orca``: the crowd suite's people under
 the social force (seeing the robot) or ORCA (blind to it), each on a fixed route (:func:`common.irsim_export.fixed_routes`). Its people move by the same
@@ -48,16 +48,17 @@ def _scenarios(suite: str, count: int, seed: int):
     return get_suite(suite).scenarios(count=count, seed=seed)
 
 
-def compare_worlds(policy_path: str | Path, suite: str, episodes: int, seed: int = 0) -> dict[str, Any]:
+def compare_worlds(policy_path: str | Path, suite: str, episodes: int, seed: int = 0, jobs: int = 1) -> dict[str, Any]:
     """The policy's summaries in flatland and in IR-SIM on the suite's first ``episodes`` held-out
-    scenarios, and where each episode whose outcome differs parts (:func:`first_difference`)."""
+    scenarios (in ``jobs`` processes: :func:`common.evaluation.evaluate`), and where each episode
+    whose outcome differs parts (:func:`first_difference`)."""
     agent = load_policy(policy_path)
     # The knobs IR-SIM cannot model (delays, wheel dynamics) are dropped for both worlds alike.
     shared = Conditions.parse(conditions_of(agent.trained_conditions).for_tier("irsim", strict=False).given())
     scenarios = list(_scenarios(suite, episodes, seed))
     radius = judged_radius(agent.env_kwargs)
     result: dict[str, Any] = {world: evaluate([agent], scenarios, world, seed=seed, conditions=shared,
-                                              goal_radius=radius)[0] for world in ("flatland", "irsim")}
+                                              goal_radius=radius, jobs=jobs)[0] for world in ("flatland", "irsim")}
     pairs = zip(scenarios, result["flatland"].rows, result["irsim"].rows)
     result["differences"] = Counter(
         first_difference(policy_path, scenario, seed + i, shared, radius, episode_limit(agent, None))
@@ -121,6 +122,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--episodes", type=int, default=200)
     parser.add_argument("--suites", default="sparse,cluttered", help="comma-separated suites, or crowd_sfm, crowd_orca")
     parser.add_argument("--policy", nargs="*", metavar="ZIP", help="default: the shipped 2D policies")
+    parser.add_argument("--jobs", type=int, default=1, help="worker processes for the episodes (the same figures)")
     args = parser.parse_args(argv)
     policies = args.policy or [str(SHIPPED / f"{name}.zip") for name in SHIPPED_2D]
     print("| policy | suite | flatland success (95% CI) | IR-SIM success (95% CI) | difference, points "
@@ -128,7 +130,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     print("|---|---|---:|---:|---:|---:|---:|")
     for path in policies:
         for suite in args.suites.split(","):
-            result = compare_worlds(path, suite, args.episodes)
+            result = compare_worlds(path, suite, args.episodes, jobs=args.jobs)
             flat, irsim = result["flatland"], result["irsim"]
             differ = result["differences"]
             parts = ", ".join(f"{count} {kind}" for kind, count in sorted(differ.items())) or "0"
