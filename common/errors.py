@@ -41,6 +41,11 @@ class ConfigError(ValueError):
             message = message[: MESSAGE_CHARS - 3] + "..."
         super().__init__(message)
 
+    def __reduce__(self):
+        # Pickled by its three parts (an exception pickles its message alone, which this class
+        # cannot be built from): a worker process's error reaches the caller as this one line.
+        return ConfigError, (self.source, self.field, self.problem)
+
     def with_source(self, source: str | Path) -> "ConfigError":
         """The same error, attributed to ``source`` (for loaders that parse text before knowing its file)."""
         return ConfigError(source, self.field, self.problem)

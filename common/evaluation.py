@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import math
 import multiprocessing
+import os
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -276,15 +277,20 @@ def evaluate(
     jobs: int = 1,
 ) -> list[Summary]:
     """Every agent on the same scenarios with the same seeds (episode i uses ``seed + i``) under the
-    same ``conditions``, judged within ``goal_radius`` (default each scenario's own); ``max_steps``
-    defaults to each agent's own (see :func:`episode_limit`). ``jobs`` > 1 runs the episodes in
-    that many worker processes (see :func:`_in_processes`): the same episodes, the same figures."""
+    same ``conditions``, judged within ``goal_radius`` (default each scenario's own); one summary
+    per agent, in order. ``max_steps`` defaults to each agent's own (see :func:`episode_limit`).
+
+    ``jobs`` > 1 runs the episodes in up to that many worker processes, one per core at most (see
+    :func:`_in_processes`), with the same figures, provided each agent pickles (a policy opened
+    from a file does) and its ``reset`` forgets everything of the episode before, as an agent
+    must anyway; ``progress`` then hears of a chunk of episodes at a time."""
     resolved = (conditions or Conditions()).for_tier(tier)
     scenarios = [resolved.scenario(s) for s in scenarios]
     shortest = [shortest_path_length(s, goal_radius) for s in scenarios]
-    batch = Batch(scenarios, shortest, tier, seed, max_steps, resolved, goal_radius)
-    if jobs > 1 and len(agents) * len(scenarios) > 1:
-        rows = _in_processes(list(agents), batch, jobs, progress)
+    batch = _Batch(scenarios, shortest, tier, seed, max_steps, resolved, goal_radius)
+    workers = min(jobs, os.cpu_count() or 1)
+    if workers > 1 and len(agents) * len(scenarios) > 1:
+        rows = _in_processes(list(agents), batch, workers, progress)
     else:
         rows = []
         for agent in agents:
@@ -298,7 +304,7 @@ def evaluate(
 
 
 @dataclass(frozen=True)
-class Batch:
+class _Batch:
     """The episodes every agent drives in one :func:`evaluate`: scenario i with seed ``seed + i``."""
 
     scenarios: list[Scenario]
@@ -316,39 +322,44 @@ class Batch:
                 for i in range(start, stop)]
 
 
-_WORKER: dict[str, list] = {}  # a worker process's agents, unpickled once when it starts
+_WORKER: dict[str, object] = {}  # a worker process's agents and episodes, unpickled once when it starts
 
 
-def _start_worker(agents: list) -> None:
-    _WORKER["agents"] = agents
+def _start_worker(agents: list, batch: _Batch) -> None:
+    _WORKER["agents"], _WORKER["batch"] = agents, batch
     torch = sys.modules.get("torch")  # loaded by unpickling a policy
     if torch is not None:
         torch.set_num_threads(1)  # a worker per core: more threads each would only contend
 
 
-def _run_chunk(agent: int, batch: Batch, start: int, stop: int) -> list[Episode]:
-    return batch.run(_WORKER["agents"][agent], start, stop)
+def _run_chunk(agent_index: int, start: int, stop: int) -> list[Episode]:
+    return _WORKER["batch"].run(_WORKER["agents"][agent_index], start, stop)
 
 
-def _in_processes(agents: list, batch: Batch, jobs: int, progress: Callable[[int], None] | None) -> list[list[Episode]]:
-    """Each agent's episodes in chunks over ``jobs`` fresh processes (``spawn``: no thread or
+def _in_processes(agents: list, batch: _Batch, workers: int,
+                  progress: Callable[[int], None] | None) -> list[list[Episode]]:
+    """Each agent's episodes in chunks over ``workers`` fresh processes (``spawn``: no thread or
     simulator state of this process is copied). Every episode builds its own world from its
-    scenario and seed, so it ends as it does in this process; the agents are sent once per worker
-    (a policy loaded from a file is loaded again there, by its path)."""
+    scenario and seed, so it ends as it does in this process; the agents and the episodes are
+    sent once per worker (a policy opened from a file is opened again there, by its path)."""
     count = len(batch.scenarios)
-    size = max(1, math.ceil(count * len(agents) / (4 * jobs)))  # a few chunks per worker keep them all busy
+    size = max(1, math.ceil(count * len(agents) / (4 * workers)))  # a few chunks per worker keep them all busy
     chunks = [(a, start, min(start + size, count)) for a in range(len(agents)) for start in range(0, count, size)]
-    rows: list[list[Episode]] = [[] for _ in agents]
     done: dict[tuple[int, int], list[Episode]] = {}
     context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(min(jobs, len(chunks)), mp_context=context, initializer=_start_worker,
-                             initargs=(agents,)) as pool:
-        futures = {pool.submit(_run_chunk, a, batch, start, stop): (a, start) for a, start, stop in chunks}
-        for future in as_completed(futures):
-            episodes = future.result()  # a worker's error is raised here, as it would be in this process
-            done[futures[future]] = episodes
-            if progress:
-                progress(len(episodes))
+    with ProcessPoolExecutor(min(workers, len(chunks)), mp_context=context, initializer=_start_worker,
+                             initargs=(agents, batch)) as pool:
+        futures = {pool.submit(_run_chunk, *chunk): chunk[:2] for chunk in chunks}
+        try:
+            for future in as_completed(futures):
+                episodes = future.result()  # a worker's error (a ConfigError too) is raised here
+                done[futures[future]] = episodes
+                if progress:
+                    progress(len(episodes))
+        except BaseException:
+            pool.shutdown(wait=True, cancel_futures=True)  # the chunks not yet begun are dropped
+            raise
+    rows: list[list[Episode]] = [[] for _ in agents]
     for a, start, _ in chunks:
         rows[a] += done[(a, start)]
     return rows

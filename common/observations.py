@@ -140,12 +140,12 @@ def sector_bounds(beams: int, sectors: int) -> np.ndarray:
 def _encode(out, x, y, yaw, goal_x, goal_y, scale, v, w, yaw_rate, ranges, bounds, inv_range, floor, log_scale,
             low, high):
     """Fill ``out``: the goal terms (:func:`goal_terms`: from the odometry pose ``x, y, yaw`` to the
-    goal, the distance scaled by ``scale``) at 0-2 and last, v and w at 3-4, the yaw rate at 5 where the sectors start at 6, then each sector's nearest return,
-    linear (r / range_max) or, with ``log_scale`` > 0, log(max(r, floor) / floor) * log_scale; then
-    clip all of ``out`` into [low, high]. One compiled call: element writes from Python cost more than
-    the sectors, and the pose and goal come as floats because a tuple argument costs the call
-    more than a float each. The rounding follows the NumPy code it replaced (log in float64, the scale in
-    float32), identical where the C library's log and NumPy's agree (on this project's machine,
+    goal, the distance scaled by ``scale``) at 0-2 and last, v and w at 3-4, the yaw rate at 5
+    where the sectors start at 6, then each sector's nearest return, linear (r / range_max) or,
+    with ``log_scale`` > 0, log(max(r, floor) / floor) * log_scale; then clip all of ``out`` into
+    [low, high]. One compiled call: element writes from Python cost more than the sectors, and the
+    pose and goal come as floats because a tuple argument costs the call more than a float each.
+    The rounding follows the NumPy code it replaced (log in float64, the scale in float32), identical where the C library's log and NumPy's agree (on this project's machine,
     on a million values; NumPy's own SIMD log on AVX-512 may differ in the last bit). Unlike
     np.minimum/maximum, the clip does not pass NaN through: no lidar here returns one."""
     n = out.shape[0]

@@ -17,6 +17,17 @@ from common.readings import Readings
 from common.scenario import LidarSpec, RobotProfile
 
 
+# What a caller may set on an agent after opening it, carried with it to another process.
+SETTINGS = ("name", "max_steps", "env_kwargs", "home", "tier", "normalizer", "action_mapping")
+
+
+def _reopened(reopen: tuple[Callable[..., "PolicyAgent"], tuple], settings: dict) -> "PolicyAgent":
+    agent = reopen[0](*reopen[1])
+    for key, value in settings.items():
+        setattr(agent, key, value)
+    return agent
+
+
 class PolicyAgent:
     """A trained policy driven like a controller: readings -> observation -> action -> (v, w).
 
@@ -43,11 +54,12 @@ class PolicyAgent:
         self.reopen = reopen  # (loader, arguments) that open it again from its file, in another process
 
     def __reduce__(self):
-        # A policy crosses to a worker process as the recipe that opens its file: its network's
-        # runtime (a torch module's faster path, an onnxruntime session) is built there afresh.
+        # A policy crosses to a worker process as the recipe that opens its file (its network's
+        # runtime, a torch module's faster path or an onnxruntime session, is built there afresh)
+        # and the settings a caller may have changed since it was opened.
         if self.reopen is None:
             raise TypeError(f"the policy {self.name!r} was not opened from a file, so no other process can open it")
-        return self.reopen
+        return _reopened, (self.reopen, {key: getattr(self, key) for key in SETTINGS})
 
     @property
     def trained_conditions(self) -> dict:

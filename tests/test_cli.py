@@ -6,6 +6,7 @@ import json
 import subprocess
 import sys
 import tempfile
+from pathlib import Path
 
 import pytest
 
@@ -424,3 +425,25 @@ def test_a_policy_is_judged_within_the_goal_radius_it_trained_for(untrained_poli
     assert radius(agents=(plain, make_controller("pid_blend"))) is None  # each scenario's own
     with pytest.raises(ConfigError, match="trained for different goal radii"):
         radius(agents=(precise, plain))
+
+
+def test_policies_named_alike_are_told_apart_by_their_paths(tmp_path, capsys):
+    # Two runs' best.zip share one name; keyed by it, the JSON kept only the last of them.
+    shipped = Path(__file__).resolve().parents[1] / "curricula" / "policies" / "stage1_2d_ppo.zip"
+    paths = []
+    for run in ("a", "b"):
+        (tmp_path / run).mkdir()
+        paths.append(tmp_path / run / "best.zip")
+        paths[-1].write_bytes(shipped.read_bytes())
+    assert main(["eval", "--policy", *map(str, paths), "--episodes", "2", "--json"]) == 0
+    assert sorted(json.loads(capsys.readouterr().out)) == sorted(map(str, paths))
+
+
+def test_bench_reports_no_policy_figures_where_the_shipped_policies_are_not(monkeypatch, tmp_path):
+    # An installed package holds no curricula/: the policy keys are null, the rest is measured.
+    from common.curriculum import bench
+
+    monkeypatch.setattr(bench, "SHIPPED_POLICIES", tmp_path)
+    figures = bench.onnx_figures(calls=10)
+    assert figures and all(value is None for value in figures.values())
+    assert {"agent_vs_torch_ppo", "onnx_vs_torch_sac", "torch_actions_per_s_sac"} <= figures.keys()

@@ -6,6 +6,7 @@ import math
 
 import pytest
 
+from common.errors import ConfigError
 from common.evaluation import Episode, evaluate, run_episode, shortest_path_length, summarise, wilson_interval
 from common.kinematics import wrap_angle
 from common.curriculum.comparison import bar_chart, markdown_table, write_csv
@@ -123,3 +124,16 @@ def test_episodes_run_in_worker_processes_end_as_they_do_in_this_one():
     assert rows(there) == rows(here)
     assert len({e.outcome for s in here for e in s.rows}) > 1  # episodes that end differently, so an offset shows
     assert sum(seen) == 14
+
+
+class Refusing(Scripted):
+    """A toy agent that refuses every robot, as a policy refuses one it cannot drive."""
+
+    def bind(self, robot, lidar, goal_threshold) -> None:
+        raise ConfigError("robot.yaml", "kinematics", "this agent drives no robot")
+
+
+def test_an_agent_s_refusal_in_a_worker_process_reaches_the_caller_as_its_one_line():
+    with pytest.raises(ConfigError) as error:
+        evaluate([Refusing("r")], [OPEN, OPEN, OPEN], jobs=2)
+    assert str(error.value) == "robot.yaml: kinematics: this agent drives no robot"

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 import json
+import pickle
 import zipfile
 from pathlib import Path
 from typing import Callable
@@ -112,6 +113,26 @@ def test_a_saved_normaliser_loads_back_with_each_field_in_its_place(ppo_zip):
     agent = load_policy(ppo_zip)
     observation = np.linspace(-2.0, 2.0, 7)
     np.testing.assert_array_equal(agent.normalizer(observation), _normalizer()(observation))
+    # Sent to another process (pickled), it is opened again from its file and normalises alike.
+    reopened = pickle.loads(pickle.dumps(agent))
+    np.testing.assert_array_equal(reopened.normalizer(observation), _normalizer()(observation))
+
+
+def test_a_policy_crosses_to_another_process_with_what_was_set_on_it_since_it_was_opened(ppo_zip):
+    agent = load_policy(ppo_zip)
+    agent.name, agent.max_steps, agent.env_kwargs = "renamed", 77, {"lidar_noise": 0.02}
+    reopened = pickle.loads(pickle.dumps(agent))
+    assert (reopened.name, reopened.max_steps, reopened.env_kwargs) == ("renamed", 77, {"lidar_noise": 0.02})
+    observation = np.linspace(-1.0, 1.0, 7).astype(np.float32)
+    assert np.array_equal(reopened.predict(observation), agent.predict(observation))
+
+
+def test_a_policy_built_in_memory_says_why_it_cannot_cross_to_another_process():
+    from common.policy_agent import PolicyAgent
+
+    agent = PolicyAgent(object(), "nav7", 10.0, name="in_training")
+    with pytest.raises(TypeError, match="the policy 'in_training' was not opened from a file"):
+        pickle.dumps(agent)
 
 
 def _with_normalizer(change: Callable[[dict], None]) -> Callable[[Path, Path], Path]:

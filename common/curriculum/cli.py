@@ -7,6 +7,7 @@ import json
 import math
 import sys
 import warnings
+from collections import Counter
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Sequence
 
@@ -115,7 +116,7 @@ def _eval(args: argparse.Namespace) -> int:
     from common.evaluation import evaluate
     from common.curriculum.comparison import markdown_table
 
-    agents = _policies(args.policy)
+    agents = _distinct_names(_policies(args.policy), [str(path) for path in args.policy])
     _settle(args, agents)
     _scenarios(args, count=1)  # a bad scenario file is refused before any episode
     # Each policy runs episodes as long as, under the conditions and judged within the goal radius
@@ -147,6 +148,22 @@ def _policies(paths):
     from common.curriculum.policy import load_policy
 
     return [agent if _is_onnx(path) else load_policy(agent) for path, agent in zip(paths, opened)]
+
+
+def _distinct_names(agents: list, labels: list[str]) -> list:
+    """The agents, those that share a name (two runs' ``best.zip`` are both CURRICULUM/STAGE, a
+    policy file may be called like a controller) renamed by their label (a policy's path), and
+    any still alike numbered: the table, the JSON and the GIFs key their rows by name."""
+    counts = Counter(agent.name for agent in agents)
+    for agent, label in zip(agents, labels):
+        if counts[agent.name] > 1:
+            agent.name = label
+    seen: Counter = Counter()
+    for agent in agents:
+        seen[agent.name] += 1
+        if seen[agent.name] > 1:
+            agent.name = f"{agent.name} ({seen[agent.name]})"
+    return agents
 
 
 def _is_onnx(path) -> bool:
@@ -273,7 +290,8 @@ def _compare(args: argparse.Namespace) -> int:
     policies = _policies(args.policy)
     _settle(args, policies)
     scenarios = _scenarios(args)  # a bad file is refused before the controllers and worlds load (seconds)
-    agents = _controllers(args.controllers, "--controllers") + policies
+    controllers = _controllers(args.controllers, "--controllers")
+    agents = _distinct_names(controllers + policies, [c.name for c in controllers] + [str(p) for p in args.policy or []])
 
     from common.evaluation import evaluate
     from common.curriculum.comparison import bar_chart, markdown_table, write_csv

@@ -124,6 +124,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--policy", nargs="*", metavar="ZIP", help="default: the shipped 2D policies")
     parser.add_argument("--jobs", type=int, default=1, help="worker processes for the episodes (the same figures)")
     args = parser.parse_args(argv)
+    if args.jobs < 1:
+        parser.error(f"--jobs: must be from 1, got {args.jobs}")
     policies = args.policy or [str(SHIPPED / f"{name}.zip") for name in SHIPPED_2D]
     print("| policy | suite | flatland success (95% CI) | IR-SIM success (95% CI) | difference, points "
           "| arrived in one world only: flatland / IR-SIM (McNemar p) | episodes with another outcome, by where they part |")

@@ -73,8 +73,9 @@ class DeterministicAction:
     same layers on the same tensors and the same clipping or unscaling of the action,
     without stable-baselines3's per-call bookkeeping (every module switched to evaluation mode
     again, the observation's shape checks) and without the action distribution built only to read
-    its mode, which for these policies is their mean (see :func:`mean_action`). A policy in
-    training mode, or an observation of another shape, goes through ``predict`` itself."""
+    its mode, which for these policies is their mean (see :func:`mean_action`; where torch's
+    argument checks are on, ``predict`` refuses a NaN mean that this passes on). A policy
+    in training mode, or an observation of another shape, goes through ``predict`` itself."""
 
     def __init__(self, policy) -> None:
         self.policy = policy
@@ -102,7 +103,9 @@ def mean_action(policy) -> Callable[[torch.Tensor], torch.Tensor] | None:
     from stable_baselines3.sac.policies import SACPolicy
     from stable_baselines3.td3.policies import TD3Policy
 
-    if isinstance(policy, ActorCriticPolicy) and type(policy.action_dist) is DiagGaussianDistribution:
+    # Exact types: a subclass may read its action elsewhere, as NavActorCriticPolicy reads its bounded mean.
+    gaussian = type(policy) in (ActorCriticPolicy, NavActorCriticPolicy)
+    if gaussian and type(policy.action_dist) is DiagGaussianDistribution:
         bounded = getattr(policy, "bounded_mean", False)
 
         def gaussian_mean(observations: torch.Tensor) -> torch.Tensor:
@@ -111,11 +114,11 @@ def mean_action(policy) -> Callable[[torch.Tensor], torch.Tensor] | None:
             return torch.tanh(mean) if bounded else mean
 
         return gaussian_mean
-    if isinstance(policy, SACPolicy) and not policy.actor.use_sde:
+    if type(policy) is SACPolicy and not policy.actor.use_sde:
         actor = policy.actor
         return lambda observations: torch.tanh(actor.mu(actor.latent_pi(
             actor.extract_features(observations, actor.features_extractor))))
-    if isinstance(policy, TD3Policy):
+    if type(policy) is TD3Policy:
         return policy.actor
     return None
 
