@@ -1,12 +1,15 @@
-"""Aggregates of learning figures over seeds: the interquartile mean with a bootstrap interval.
+"""Aggregates of learning figures over seeds: the interquartile mean with a bootstrap interval;
+and two agents' outcomes on the same episodes compared pair by pair.
 
 A learning figure is a distribution over seeds; with few seeds the interquartile mean and its
-percentile-bootstrap 95 % interval are what rliable recommends (Agarwal et al. 2021).
+percentile-bootstrap 95 % interval are what rliable recommends (Agarwal et al. 2021). Two agents
+driven on the same episodes are compared episode by episode (McNemar's test), which tells apart
+rates whose separate intervals overlap.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 from scipy import stats
@@ -26,3 +29,15 @@ def aggregate(values: list[float], seed: int = 0, resamples: int = 2000) -> dict
     else:
         ci = [iqm, iqm]
     return {**out, "mean": float(data.mean()), "iqm": iqm, "ci95": ci}
+
+
+def mcnemar(first: Sequence[bool], second: Sequence[bool]) -> tuple[int, int, float]:
+    """Paired outcomes (arrived or not) of two agents on the same episodes: how many only the first
+    arrived in, how many only the second, and McNemar's exact two-sided p-value (a binomial test of
+    the one count among both: whether one arrives more often than chance flips would say)."""
+    if len(first) != len(second):
+        raise ValueError(f"paired outcomes need the same episodes: {len(first)} against {len(second)}")
+    only_first = sum(a and not b for a, b in zip(first, second))
+    only_second = sum(b and not a for a, b in zip(first, second))
+    either = only_first + only_second
+    return only_first, only_second, float(stats.binomtest(only_first, either).pvalue) if either else 1.0

@@ -220,7 +220,9 @@ def test_compare_writes_table_csv_chart_and_prints_the_agreed_json(tmp_path, cap
     for figures in result.values():
         assert {"success_rate", "collision_rate", "timeout_rate", "spl", "mean_steps", "mean_path_length",
                 "episodes"} <= set(figures) and figures["episodes"] == 2
-    assert (out / "comparison.md").read_text().count("| astar_pursuit |") == 1
+    table, paired = (out / "comparison.md").read_text().split("Paired with ")
+    assert table.count("| astar_pursuit |") == 1 and table.count("| go_to_goal |") == 1
+    assert paired.count("| astar_pursuit |") + paired.count("| go_to_goal |") == 1  # the other against the best
     assert (out / "episodes.csv").read_text().count("\n") == 5
     assert (out / "comparison.png").stat().st_size > 1000
 

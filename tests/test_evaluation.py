@@ -137,3 +137,22 @@ def test_an_agent_s_refusal_in_a_worker_process_reaches_the_caller_as_its_one_li
     with pytest.raises(ConfigError) as error:
         evaluate([Refusing("r")], [OPEN, OPEN, OPEN], jobs=2)
     assert str(error.value) == "robot.yaml: kinematics: this agent drives no robot"
+
+
+def _arrivals(agent: str, outcomes: str) -> list[Episode]:
+    return [Episode(agent, f"s{i}", i, "success" if c == "s" else "collision", 10, 1.0, 1.0, 1.0, 0.0)
+            for i, c in enumerate(outcomes)]
+
+
+def test_the_paired_table_sets_each_agent_against_the_one_that_arrived_most_often():
+    from common.curriculum.comparison import paired_table
+
+    best = summarise("best", _arrivals("best", "ssssssss" + "ss"))
+    # 'near' misses two the best arrived in; 'other' misses six, and arrives in none the best missed.
+    near = summarise("near", _arrivals("near", "ssssssss" + "cc"))
+    other = summarise("other", _arrivals("other", "sscccccc" + "ss"))
+    table = paired_table([near, best, other])
+    assert "Paired with `best`" in table
+    assert "| near | 0 | 2 | 0.50 |" in table and "| other | 0 | 6 | 0.03 |" in table
+    assert "| best |" not in table
+    assert paired_table([best]) == ""

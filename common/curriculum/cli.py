@@ -294,7 +294,7 @@ def _compare(args: argparse.Namespace) -> int:
     agents = _distinct_names(controllers + policies, [c.name for c in controllers] + [str(p) for p in args.policy or []])
 
     from common.evaluation import evaluate
-    from common.curriculum.comparison import bar_chart, markdown_table, write_csv
+    from common.curriculum.comparison import bar_chart, markdown_table, paired_table, write_csv
 
     radius, conditions = _judged(args, agents), _conditions(args, agents)
     scenarios = _scenarios(args, conditions=conditions) if not args.scenario_file else scenarios
@@ -309,6 +309,8 @@ def _compare(args: argparse.Namespace) -> int:
     judged = f"{radius:g} m" if radius is not None else "each scenario's radius"
     title = f"{args.world} / {source}: {_counted(len(scenarios), 'episode')} from seed {args.seed}, judged within {judged}"
     table = markdown_table(summaries, title)
+    if paired := paired_table(summaries):
+        table += "\n" + paired
     (out / "comparison.md").write_text(table)
     write_csv(summaries, out / "episodes.csv")
     bar_chart(summaries, out / "comparison.png", title)

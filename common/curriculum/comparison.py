@@ -11,6 +11,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from common.evaluation import OUTCOMES, Summary, episodes_as_dicts
+from common.statistics import mcnemar
 
 _COLOURS = {"success": "tab:green", "collision": "tab:red", "timeout": "tab:orange", "stuck": "tab:gray"}
 
@@ -41,6 +42,24 @@ def markdown_table(summaries: Sequence[Summary], title: str | None = None) -> st
         if social:
             line += _social_cells(s.social)
         lines.append(line)
+    return "\n".join(lines) + "\n"
+
+
+def paired_table(summaries: Sequence[Summary]) -> str:
+    """Each agent against the one that arrived most often (the first of equals), episode by episode
+    on the same episodes: those only it arrived in, those only the best did, and McNemar's exact
+    p-value (:func:`common.statistics.mcnemar`). Empty for fewer than two agents."""
+    if len(summaries) < 2:
+        return ""
+    best = max(summaries, key=lambda s: s.success_rate)
+    arrived = {id(s): [e.outcome == "success" for e in s.rows] for s in summaries}
+    lines = [f"Paired with `{best.agent}`, the agent that arrived most often, on the same episodes:", "",
+             f"| agent | arrived where `{best.agent}` did not | `{best.agent}` arrived where it did not | McNemar p |",
+             "|---|---:|---:|---:|"]
+    for s in summaries:
+        if s is not best:
+            only_it, only_best, p = mcnemar(arrived[id(s)], arrived[id(best)])
+            lines.append(f"| {s.agent} | {only_it} | {only_best} | {p:.2f} |")
     return "\n".join(lines) + "\n"
 
 

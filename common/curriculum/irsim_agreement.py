@@ -28,6 +28,7 @@ from common.curriculum.policy import load_policy
 from common.evaluation import Summary, episode_limit, evaluate
 from common.generators import Suite, get_suite
 from common.irsim_export import fixed_routes
+from common.statistics import mcnemar
 from common.task import judged_radius
 
 SHIPPED = Path(__file__).resolve().parents[2] / "curricula" / "policies"
@@ -103,12 +104,7 @@ def first_difference(policy_path: str | Path, scenario, seed: int, conditions: C
 def _paired(flat: Summary, irsim: Summary) -> str:
     """Episodes that arrived in one world only, each way, and the exact McNemar test's p-value:
     whether one world lets the policy arrive more often than chance flips would."""
-    from scipy.stats import binomtest
-
-    pairs = [(a.outcome == "success", b.outcome == "success") for a, b in zip(flat.rows, irsim.rows)]
-    only_flat = sum(ours and not theirs for ours, theirs in pairs)
-    only_irsim = sum(theirs and not ours for ours, theirs in pairs)
-    p = binomtest(only_flat, only_flat + only_irsim).pvalue if only_flat + only_irsim else 1.0
+    only_flat, only_irsim, p = mcnemar(*([e.outcome == "success" for e in s.rows] for s in (flat, irsim)))
     return f"{only_flat} / {only_irsim} ({p:.2f})"
 
 
