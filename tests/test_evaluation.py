@@ -156,3 +156,5 @@ def test_the_paired_table_sets_each_agent_against_the_one_that_arrived_most_ofte
     assert "| near | 0 | 2 | 0.50 |" in table and "| other | 0 | 6 | 0.03 |" in table
     assert "| best |" not in table
     assert paired_table([best]) == ""
+    far = summarise("far", _arrivals("far", "cccccccc" + "cc"))
+    assert "| far | 0 | 10 | < 0.01 |" in paired_table([best, far])  # p = 2 / 1024

@@ -59,7 +59,8 @@ def paired_table(summaries: Sequence[Summary]) -> str:
     for s in summaries:
         if s is not best:
             only_it, only_best, p = mcnemar(arrived[id(s)], arrived[id(best)])
-            lines.append(f"| {s.agent} | {only_it} | {only_best} | {p:.2f} |")
+            shown = f"{p:.2f}" if p >= 0.01 else "< 0.01"  # not a rounded 0.00
+            lines.append(f"| {s.agent} | {only_it} | {only_best} | {shown} |")
     return "\n".join(lines) + "\n"
 
 
