@@ -207,6 +207,10 @@ class Summary:
     rows: list[Episode] = field(default_factory=list, repr=False)
     social: dict | None = None  # the social figures, where the world has movers (see social_figures)
 
+    def arrivals(self) -> list[bool]:
+        """Whether each episode arrived, in episode order (for comparisons pair by pair)."""
+        return [e.outcome == "success" for e in self.rows]
+
     def to_json(self) -> dict:
         """The agreed JSON object (plus stuck rate and the interval; and the social figures, among movers)."""
         keys = ("success_rate", "collision_rate", "timeout_rate", "stuck_rate", "spl", "mean_steps",

@@ -118,12 +118,12 @@ def test_an_irsim_world_file_runs_in_irsim_through_the_cli(capsys, tmp_path):
 
 def test_the_agreement_table_pairs_the_episodes_of_both_worlds(capsys):
     optional("irsim")
-    from types import SimpleNamespace
-
     from common.curriculum.irsim_agreement import _paired, main
+    from common.evaluation import Episode, summarise
 
     def summary(outcomes: str):
-        return SimpleNamespace(rows=[SimpleNamespace(outcome="success" if c == "s" else "collision") for c in outcomes])
+        return summarise("p", [Episode("p", f"s{i}", i, "success" if c == "s" else "collision", 1, 1.0, 1.0, 1.0, 0.0)
+                               for i, c in enumerate(outcomes)])
 
     # Two arrived only in flatland, six only in IR-SIM: the exact two-sided test of 2 in 8.
     assert _paired(summary("ssssss" + "cccccc" + "ss"), summary("sssscc" + "ssssss" + "ss")) == "2 / 6 (0.29)"

@@ -52,13 +52,12 @@ def paired_table(summaries: Sequence[Summary]) -> str:
     if len(summaries) < 2:
         return ""
     best = max(summaries, key=lambda s: s.success_rate)
-    arrived = {id(s): [e.outcome == "success" for e in s.rows] for s in summaries}
     lines = [f"Paired with `{best.agent}`, the agent that arrived most often, on the same episodes:", "",
              f"| agent | arrived where `{best.agent}` did not | `{best.agent}` arrived where it did not | McNemar p |",
              "|---|---:|---:|---:|"]
     for s in summaries:
         if s is not best:
-            only_it, only_best, p = mcnemar(arrived[id(s)], arrived[id(best)])
+            only_it, only_best, p = mcnemar(s.arrivals(), best.arrivals())
             shown = f"{p:.2f}" if p >= 0.01 else "< 0.01"  # not a rounded 0.00
             lines.append(f"| {s.agent} | {only_it} | {only_best} | {shown} |")
     return "\n".join(lines) + "\n"

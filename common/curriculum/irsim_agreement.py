@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from common.conditions import Conditions, conditions_of
+from common.curriculum.cli import _whole
 from common.curriculum.policy import load_policy
 from common.evaluation import Summary, episode_limit, evaluate
 from common.generators import Suite, get_suite
@@ -104,7 +105,7 @@ def first_difference(policy_path: str | Path, scenario, seed: int, conditions: C
 def _paired(flat: Summary, irsim: Summary) -> str:
     """Episodes that arrived in one world only, each way, and the exact McNemar test's p-value:
     whether one world lets the policy arrive more often than chance flips would."""
-    only_flat, only_irsim, p = mcnemar(*([e.outcome == "success" for e in s.rows] for s in (flat, irsim)))
+    only_flat, only_irsim, p = mcnemar(flat.arrivals(), irsim.arrivals())
     return f"{only_flat} / {only_irsim} ({p:.2f})"
 
 
@@ -118,10 +119,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--episodes", type=int, default=200)
     parser.add_argument("--suites", default="sparse,cluttered", help="comma-separated suites, or crowd_sfm, crowd_orca")
     parser.add_argument("--policy", nargs="*", metavar="ZIP", help="default: the shipped 2D policies")
-    parser.add_argument("--jobs", type=int, default=1, help="worker processes for the episodes (the same figures)")
+    parser.add_argument("--jobs", type=_whole(1, 1024), default=1, help="worker processes for the episodes (the same figures)")
     args = parser.parse_args(argv)
-    if args.jobs < 1:
-        parser.error(f"--jobs: must be from 1, got {args.jobs}")
     policies = args.policy or [str(SHIPPED / f"{name}.zip") for name in SHIPPED_2D]
     print("| policy | suite | flatland success (95% CI) | IR-SIM success (95% CI) | difference, points "
           "| arrived in one world only: flatland / IR-SIM (McNemar p) | episodes with another outcome, by where they part |")

@@ -58,10 +58,15 @@ class NavActorCriticPolicy(ActorCriticPolicy):
         self.bounded_mean = bounded_mean
         super().__init__(*args, **kwargs)
 
+    def mean_actions(self, latent_pi: torch.Tensor) -> torch.Tensor:
+        """The Gaussian's mean, bounded where ``bounded_mean``: its deterministic action."""
+        mean = self.action_net(latent_pi)
+        return torch.tanh(mean) if self.bounded_mean else mean
+
     def _get_action_dist_from_latent(self, latent_pi: torch.Tensor):
         if not self.bounded_mean:
             return super()._get_action_dist_from_latent(latent_pi)
-        return self.action_dist.proba_distribution(torch.tanh(self.action_net(latent_pi)), self.log_std)
+        return self.action_dist.proba_distribution(self.mean_actions(latent_pi), self.log_std)
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
         return {**super()._get_constructor_parameters(), "bounded_mean": self.bounded_mean}
@@ -103,15 +108,12 @@ def mean_action(policy) -> Callable[[torch.Tensor], torch.Tensor] | None:
     from stable_baselines3.sac.policies import SACPolicy
     from stable_baselines3.td3.policies import TD3Policy
 
-    # Exact types: a subclass may read its action elsewhere, as NavActorCriticPolicy reads its bounded mean.
-    gaussian = type(policy) in (ActorCriticPolicy, NavActorCriticPolicy)
-    if gaussian and type(policy.action_dist) is DiagGaussianDistribution:
-        bounded = getattr(policy, "bounded_mean", False)
+    # Exact types: a subclass may read its action elsewhere (every PPO policy here is a NavActorCriticPolicy).
+    if type(policy) is NavActorCriticPolicy and type(policy.action_dist) is DiagGaussianDistribution:
 
         def gaussian_mean(observations: torch.Tensor) -> torch.Tensor:
             features = BaseModel.extract_features(policy, observations, policy.pi_features_extractor)
-            mean = policy.action_net(policy.mlp_extractor.forward_actor(features))
-            return torch.tanh(mean) if bounded else mean
+            return policy.mean_actions(policy.mlp_extractor.forward_actor(features))
 
         return gaussian_mean
     if type(policy) is SACPolicy and not policy.actor.use_sde:
