@@ -140,6 +140,7 @@ def test_bench_json_has_the_agreed_keys(capsys, monkeypatch, tmp_path):
     assert results["warehouse_env_steps_per_s"] > 0 and results["ppo_steps_per_s_cluttered"] > 0
     assert 0 < results["ppo_rollout_share_sparse"] < 1
     assert results["ppo_steps_per_s_cluttered_subproc"] > 0 and results["ppo_subproc_vs_dummy"] > 0
+    assert results["ppo_stock_steps_per_s_sparse"] > 0 and results["ppo_vs_stock_sparse"] > 0
     assert results["movers_vs_static"] > 0 and results["physics3d_movers_vs_static"] > 0
     assert results["reset_ms_maze"] > 0 and results["reset_ms_passages"] > 0
     for algorithm in ("ppo", "sac"):
@@ -150,16 +151,19 @@ def test_bench_json_has_the_agreed_keys(capsys, monkeypatch, tmp_path):
 def test_bench_takes_the_faster_of_two_alternated_ppo_runs_of_each_setting(monkeypatch):
     from common.curriculum import bench
 
-    measured = iter([(100.0, 0.5), (80.0, 0.6), (60.0, 0.1), (120.0, 0.7), (70.0, 0.8), (90.0, 0.9)])
+    measured = iter([(100.0, 0.5), (80.0, 0.6), (60.0, 0.1), (75.0, 0.4), (120.0, 0.7), (70.0, 0.8), (90.0, 0.9),
+                     (96.0, 0.6)])
     order = []
 
-    def fake(kind, steps, seed=0, vec_env="dummy"):
-        order.append((kind, vec_env))
+    def fake(kind, steps, seed=0, vec_env="dummy", stock=False):
+        order.append((kind, vec_env, stock))
         return next(measured)
 
     monkeypatch.setattr(bench, "ppo_steps_per_s", fake)
     figures = bench._ppo_figures(2048)
-    assert order == [("sparse", "dummy"), ("cluttered", "dummy"), ("cluttered", "subproc")] * 2
+    assert order == [("sparse", "dummy", False), ("cluttered", "dummy", False), ("cluttered", "subproc", False),
+                     ("sparse", "dummy", True)] * 2
+    assert figures["ppo_stock_steps_per_s_sparse"] == 96.0 and figures["ppo_vs_stock_sparse"] == round(120 / 96, 3)
     assert figures["ppo_steps_per_s_sparse"] == 120.0 and figures["ppo_rollout_share_sparse"] == 0.7
     assert figures["ppo_steps_per_s_cluttered"] == 80.0 and figures["ppo_cluttered_vs_sparse"] == round(80 / 120, 3)
     assert figures["ppo_steps_per_s_cluttered_subproc"] == 90.0 and figures["ppo_subproc_vs_dummy"] == round(90 / 80, 3)

@@ -156,26 +156,34 @@ def _irsim_file_figures(key: str, data: dict, steps: int) -> dict[str, Any]:
             f"{key}_flatland_vs_irsim": None if theirs is None else round(flat / theirs, 1)}
 
 
-def ppo_steps_per_s(kind: str, steps: int = 16_384, seed: int = 0, vec_env: str = "dummy") -> tuple[float, float]:
+def ppo_steps_per_s(kind: str, steps: int = 16_384, seed: int = 0, vec_env: str = "dummy",
+                    stock: bool = False) -> tuple[float, float]:
     """PPO's training throughput (env steps per second, learner included) with the main job's
-    settings (8 envs, n_steps 256, batch 256, 5 epochs, lidar43_log) on a generator kind, and the
-    share of that time spent collecting rollouts (the envs and the policy's forward passes)
-    rather than in gradient updates. ``vec_env``: ``dummy`` (one process) or ``subproc`` (one
-    process per env), as a stage's ``vec_env``."""
+    settings (8 envs, n_steps 256, batch 256, 5 epochs, lidar43_log, its bounded-mean policy, as
+    the runner trains it) on a generator kind, and the share of that time spent collecting
+    rollouts (the envs and the policy's forward passes) rather than in gradient updates.
+    ``vec_env``: ``dummy`` (one process) or ``subproc`` (one process per env), as a stage's
+    ``vec_env``. ``stock``: stable-baselines3's own MlpPolicy, torch's argument checks and
+    optimiser defaults instead, for the same arithmetic."""
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.logger import Logger
 
-    from common.curriculum.policy import vec_env_class
+    from common.curriculum.policy import NavActorCriticPolicy, optimizers_step_together, vec_env_class
     from flatland.env import NavEnv
 
-    threads = torch.get_num_threads()
+    threads, checks = torch.get_num_threads(), torch.distributions.Distribution._validate_args
     torch.set_num_threads(1)
+    torch.distributions.Distribution.set_default_validate_args(stock)
     env = make_vec_env(NavEnv, n_envs=8, seed=seed, env_kwargs={"world": kind, "observation": "lidar43_log",
                                                               "max_steps": 300}, vec_env_cls=vec_env_class(vec_env))
     try:
-        model = PPO("MlpPolicy", env, n_steps=256, batch_size=256, n_epochs=5, seed=seed, device="cpu")
+        policy = ("MlpPolicy", {}) if stock else (NavActorCriticPolicy, {"bounded_mean": True})
+        model = PPO(policy[0], env, n_steps=256, batch_size=256, n_epochs=5, seed=seed, device="cpu",
+                    policy_kwargs=policy[1])
+        if not stock:
+            optimizers_step_together(model)
         model.set_logger(Logger(folder=None, output_formats=[]))  # else SB3 leaves an empty /tmp/SB3-* folder
         model.learn(2048)  # warm-up: the first rollout also compiles numba kernels
         spent = {"collect_rollouts": 0.0, "train": 0.0}
@@ -187,6 +195,7 @@ def ppo_steps_per_s(kind: str, steps: int = 16_384, seed: int = 0, vec_env: str 
     finally:
         env.close()  # a subproc env's worker processes end here, even if training failed
         torch.set_num_threads(threads)
+        torch.distributions.Distribution.set_default_validate_args(checks)
 
 
 def planner_pairs(scenario: Scenario, grid: OccupancyGrid, count: int = 20, seed: int = 0,
@@ -540,11 +549,13 @@ def _timed(method, spent: dict[str, float], name: str):
 def _ppo_figures(steps: int) -> dict[str, float]:
     # Each setting's best of two, alternated: one round of these few-second runs swung the ratio
     # from 0.96 to 0.80 between two benches of the same code on this noisy machine.
-    fastest = fastest_alternated({f"{kind} {vec_env}": lambda kind=kind, vec_env=vec_env: ppo_steps_per_s(
-        kind, steps, vec_env=vec_env) for kind, vec_env in (("sparse", "dummy"), ("cluttered", "dummy"),
-                                                            ("cluttered", "subproc"))}, runs=2)
-    (sparse, sparse_share), (cluttered, cluttered_share), (subproc, _) = fastest.values()
+    settings = (("sparse", "dummy", False), ("cluttered", "dummy", False), ("cluttered", "subproc", False),
+                ("sparse", "dummy", True))
+    fastest = fastest_alternated({f"{kind} {vec_env} {stock}": lambda kind=kind, vec_env=vec_env, stock=stock: ppo_steps_per_s(
+        kind, steps, vec_env=vec_env, stock=stock) for kind, vec_env, stock in settings}, runs=2)
+    (sparse, sparse_share), (cluttered, cluttered_share), (subproc, _), (stock, _) = fastest.values()
     return {"ppo_steps_per_s_sparse": round(sparse, 1), "ppo_steps_per_s_cluttered": round(cluttered, 1),
             "ppo_cluttered_vs_sparse": round(cluttered / sparse, 3),
             "ppo_steps_per_s_cluttered_subproc": round(subproc, 1), "ppo_subproc_vs_dummy": round(subproc / cluttered, 3),
-            "ppo_rollout_share_sparse": round(sparse_share, 3), "ppo_rollout_share_cluttered": round(cluttered_share, 3)}
+            "ppo_rollout_share_sparse": round(sparse_share, 3), "ppo_rollout_share_cluttered": round(cluttered_share, 3),
+            "ppo_stock_steps_per_s_sparse": round(stock, 1), "ppo_vs_stock_sparse": round(sparse / stock, 3)}

@@ -80,7 +80,7 @@ class PolicyKwargs(BaseModel):
         """The keyword arguments stable-baselines3 takes (unset keys left to its defaults)."""
         out = self.model_dump(exclude_none=True)
         if "activation_fn" in out:
-            out["activation_fn"] = _activation_classes()[out["activation_fn"]]
+            out["activation_fn"] = activation_classes()[out["activation_fn"]]
         return out
 
     @classmethod
@@ -88,7 +88,7 @@ class PolicyKwargs(BaseModel):
         """Describe a model's ``policy_kwargs``; ValueError if they hold what plain data cannot."""
         data = {k: v for k, v in kwargs.items() if k != "use_sde"}  # SAC keeps use_sde there too
         if "activation_fn" in data:
-            names = {activation: name for name, activation in _activation_classes().items()}
+            names = {activation: name for name, activation in activation_classes().items()}
             data["activation_fn"] = names.get(data["activation_fn"], repr(data["activation_fn"]))
         try:
             return cls.model_validate(data)
@@ -96,7 +96,7 @@ class PolicyKwargs(BaseModel):
             raise ValueError(f"policy_kwargs {quote(kwargs)} cannot be stored as data: {exc.errors()[0]['msg']}") from None
 
 
-def _activation_classes() -> dict[str, type]:
+def activation_classes() -> dict[str, type]:
     import torch.nn as nn
 
     return {"tanh": nn.Tanh, "relu": nn.ReLU, "elu": nn.ELU, "leaky_relu": nn.LeakyReLU, "gelu": nn.GELU, "silu": nn.SiLU}

@@ -16,7 +16,10 @@ from typing import Any, Callable
 
 import numpy as np
 import torch
-from stable_baselines3.common.policies import ActorCriticPolicy
+from gymnasium import spaces
+from stable_baselines3.common.policies import ActorCriticPolicy, BaseModel
+from stable_baselines3.common.torch_layers import FlattenExtractor, MlpExtractor
+from torch import nn
 
 from common.actions import ACTION_SPACE
 from common.curriculum.policy_file import MANIFEST, Manifest, PolicyFile
@@ -51,12 +54,48 @@ class NavActorCriticPolicy(ActorCriticPolicy):
     deterministic action then stays at the bound (full speed beside an obstacle, or standing
     still where training's noise would have crept on; docs/training.md). A bounded mean keeps
     the distribution's centre inside the actions it can take. The network and its weights are
-    SB3's own: only where the mean is read changes.
+    SB3's own: only where the mean is read changes, and (:meth:`latents`) how its layers are
+    called, which changes the time and not a bit of the result.
     """
 
     def __init__(self, *args, bounded_mean: bool = False, **kwargs) -> None:
         self.bounded_mean = bounded_mean
         super().__init__(*args, **kwargs)
+        self._layers = _plain_mlp_layers(self)
+
+    def latents(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The actor's and the critic's latent codes of a batch of observations, as stable-baselines3
+        computes them, to the bit. Where the network is its plain MLP over flat vector observations
+        (:func:`_plain_mlp_layers`) the layers' own ``forward`` run one after another: calling each
+        module through ``nn.Module.__call__`` (for hooks, which these networks never carry) was 60%
+        of the forward pass of a batch of eight, 61 µs of 146, once per rollout step and minibatch."""
+        if self._layers is None:
+            features = self.extract_features(obs)
+            if self.share_features_extractor:
+                return self.mlp_extractor(features)
+            return self.mlp_extractor.forward_actor(features[0]), self.mlp_extractor.forward_critic(features[1])
+        features = _flat(obs)
+        return _through(self._layers[0], features), _through(self._layers[1], features)
+
+    def actor_latent(self, obs: torch.Tensor) -> torch.Tensor:
+        """The actor's latent code alone (what its action reads), as :meth:`latents` computes it."""
+        if self._layers is None:
+            return self.mlp_extractor.forward_actor(BaseModel.extract_features(self, obs, self.pi_features_extractor))
+        return _through(self._layers[0], _flat(obs))
+
+    def forward(self, obs: torch.Tensor, deterministic: bool = False) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        latent_pi, latent_vf = self.latents(obs)
+        values = self.value_net(latent_vf)
+        distribution = self._get_action_dist_from_latent(latent_pi)
+        actions = distribution.get_actions(deterministic=deterministic)
+        log_prob = distribution.log_prob(actions)
+        return actions.reshape((-1, *self.action_space.shape)), values, log_prob
+
+    def evaluate_actions(self, obs: torch.Tensor, actions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        latent_pi, latent_vf = self.latents(obs)
+        distribution = self._get_action_dist_from_latent(latent_pi)
+        log_prob = distribution.log_prob(actions)
+        return self.value_net(latent_vf), log_prob, distribution.entropy()
 
     def mean_actions(self, latent_pi: torch.Tensor) -> torch.Tensor:
         """The Gaussian's mean, bounded where ``bounded_mean``: its deterministic action."""
@@ -70,6 +109,34 @@ class NavActorCriticPolicy(ActorCriticPolicy):
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
         return {**super()._get_constructor_parameters(), "bounded_mean": self.bounded_mean}
+
+
+def _plain_mlp_layers(policy: ActorCriticPolicy) -> tuple[tuple[Callable, ...], tuple[Callable, ...]] | None:
+    """The ``forward`` methods of the actor's and the critic's layers, in order, where ``policy`` is
+    stable-baselines3's plain MLP: flat Box observations, flattening feature extractors and hidden
+    layers of ``nn.Linear`` and the activations a curriculum may name. None otherwise (a custom
+    extractor or layer goes through stable-baselines3's own calls)."""
+    from common.curriculum.hyperparams import activation_classes
+
+    plain_layers = (nn.Linear, *activation_classes().values())
+    extractors = (policy.features_extractor, policy.pi_features_extractor, policy.vf_features_extractor)
+    mlp = policy.mlp_extractor
+    if not (isinstance(policy.observation_space, spaces.Box) and len(policy.observation_space.shape) == 1
+            and all(type(extractor) is FlattenExtractor for extractor in extractors) and type(mlp) is MlpExtractor
+            and all(type(layer) in plain_layers for layer in (*mlp.policy_net, *mlp.value_net))):
+        return None
+    return tuple(layer.forward for layer in mlp.policy_net), tuple(layer.forward for layer in mlp.value_net)
+
+
+def _flat(obs: torch.Tensor) -> torch.Tensor:
+    """What stable-baselines3's preprocessing of a Box and its FlattenExtractor make of ``obs``."""
+    return obs.float().flatten(1)
+
+
+def _through(layers: tuple[Callable, ...], x: torch.Tensor) -> torch.Tensor:
+    for layer in layers:
+        x = layer(x)
+    return x
 
 
 class DeterministicAction:
@@ -104,18 +171,13 @@ def mean_action(policy) -> Callable[[torch.Tensor], torch.Tensor] | None:
     around them: PPO's Gaussian mean (through tanh where ``bounded_mean``), SAC's squashed mean,
     TD3's actor. None where the mode is not that mean alone (gSDE, another distribution)."""
     from stable_baselines3.common.distributions import DiagGaussianDistribution
-    from stable_baselines3.common.policies import BaseModel
     from stable_baselines3.sac.policies import SACPolicy
     from stable_baselines3.td3.policies import TD3Policy
 
     # Exact types: a subclass may read its action elsewhere (every PPO policy here is a NavActorCriticPolicy).
     if type(policy) is NavActorCriticPolicy and type(policy.action_dist) is DiagGaussianDistribution:
 
-        def gaussian_mean(observations: torch.Tensor) -> torch.Tensor:
-            features = BaseModel.extract_features(policy, observations, policy.pi_features_extractor)
-            return policy.mean_actions(policy.mlp_extractor.forward_actor(features))
-
-        return gaussian_mean
+        return lambda observations: policy.mean_actions(policy.actor_latent(observations))
     if type(policy) is SACPolicy and not policy.actor.use_sde:
         actor = policy.actor
         return lambda observations: torch.tanh(actor.mu(actor.latent_pi(
@@ -340,6 +402,20 @@ def _optimizer_state_fits(optimizer) -> bool:
                 if hasattr(value, "shape") and value.dim() > 0 and value.shape != parameter.shape:
                     return False
     return True
+
+
+def optimizers_step_together(model) -> None:
+    """Make a CPU model's optimisers update all their tensors with one call per operation
+    (torch's ``foreach`` kernels, the default only on CUDA): the same arithmetic, the same weights
+    to the bit, and Adam's step 22% faster on PPO's two 64 × 64 networks (389 µs against 496). Call
+    it again after loading optimiser states, which bring back the saved settings."""
+    if model.device.type != "cpu":
+        return
+    for name in model._get_torch_save_params()[0]:
+        optimizer = _attribute(model, name)
+        if isinstance(optimizer, torch.optim.Optimizer):
+            for group in optimizer.param_groups:
+                group["foreach"] = True
 
 
 def _attribute(model, dotted: str):

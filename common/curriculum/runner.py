@@ -25,7 +25,8 @@ from common.atomic import atomic_write
 from common.conditions import conditions_of
 from common.curriculum.comparison import write_csv
 from common.curriculum.hyperparams import resolve_hyperparams
-from common.curriculum.policy import DeterministicAction, algorithm_class, load_weights, policy_class, vec_env_class
+from common.curriculum.policy import (DeterministicAction, algorithm_class, load_weights, optimizers_step_together,
+                                      policy_class, vec_env_class)
 from common.curriculum.policy_file import Normalizer, update_manifest
 from common.curriculum.replay import load_replay
 from common.curriculum.run_directory import (LOCK_NAME, MARKER, EvalLog, StagePaths, check_claimable, clear_unstarted,
@@ -253,6 +254,7 @@ class Runner:
             if isinstance(states, list) and len(states) == venv.num_envs:
                 for env_index, env_state in enumerate(states):
                     venv.env_method("restore_rng", env_state, indices=[env_index])
+        optimizers_step_together(model)
         already = int(model.num_timesteps)
         self.eval_log.truncate(stage.name, already)
         if resuming:
