@@ -7,17 +7,38 @@ import numpy as np
 import pytest
 import torch
 from stable_baselines3 import PPO, SAC
+from stable_baselines3.common.policies import ActorCriticPolicy, BaseModel
 
 import flatland  # noqa: F401  (registers the env)
 from common.curriculum.policy import NavActorCriticPolicy, optimizers_step_together
 
 OBSERVATIONS = gym.spaces.Box(-1.0, 1.0, (43,), np.float32)
 ACTIONS = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
+BATCH = torch.as_tensor(np.random.default_rng(0).uniform(-1.0, 1.0, (8, 43)), dtype=torch.float32)
 
 
-def _policy(**kwargs) -> NavActorCriticPolicy:
+def _policy(space=OBSERVATIONS, **kwargs) -> NavActorCriticPolicy:
     torch.manual_seed(0)
-    return NavActorCriticPolicy(OBSERVATIONS, ACTIONS, lambda _: 3e-4, **kwargs)
+    return NavActorCriticPolicy(space, ACTIONS, lambda _: 3e-4, **kwargs)
+
+
+def _outputs(policy: NavActorCriticPolicy, forward, evaluate_actions, observations=BATCH) -> list[torch.Tensor]:
+    """Actions, values and log-probabilities of a forward pass, then the values, log-probabilities,
+    entropy and every parameter's gradient of evaluating those actions, each pass from the same seed."""
+    policy.zero_grad()
+    torch.manual_seed(1)
+    actions, values, log_prob = forward(policy, observations)
+    evaluated = [output for output in evaluate_actions(policy, observations, actions.detach()) if output is not None]
+    sum(output.sum() for output in evaluated).backward()
+    return [actions, values, log_prob, *evaluated, *(parameter.grad for parameter in policy.parameters())]
+
+
+def _assert_as_stable_baselines3(policy: NavActorCriticPolicy, observations=BATCH) -> None:
+    ours = _outputs(policy, NavActorCriticPolicy.forward, NavActorCriticPolicy.evaluate_actions, observations)
+    theirs = _outputs(policy, ActorCriticPolicy.forward, ActorCriticPolicy.evaluate_actions, observations)
+    assert len(ours) == len(theirs)
+    for mine, reference in zip(ours, theirs):
+        assert torch.equal(mine, reference)
 
 
 @pytest.mark.parametrize("kwargs", [
@@ -25,34 +46,52 @@ def _policy(**kwargs) -> NavActorCriticPolicy:
     {},
     {"activation_fn": torch.nn.ReLU, "net_arch": [32, 16, 8]},
     {"share_features_extractor": False, "net_arch": {"pi": [64, 64], "vf": [32]}},
+    {"use_sde": True, "bounded_mean": True},
+    {"use_sde": True},
 ])
-def test_direct_layer_calls_give_stable_baselines3_s_actions_values_log_probs_and_gradients(kwargs):
-    fast = _policy(**kwargs)
-    assert fast._layers is not None, "the plain MLP must take the direct path, or this test compares nothing"
-    stock = _policy(**kwargs)
-    stock._layers = None  # stable-baselines3's own module calls
-    observations = torch.as_tensor(np.random.default_rng(0).uniform(-1.0, 1.0, (8, 43)), dtype=torch.float32)
-    outputs = []
-    for policy in (fast, stock):
-        torch.manual_seed(1)
-        actions, values, log_prob = policy(observations)
-        evaluated = policy.evaluate_actions(observations, actions.detach())
-        loss = sum(output.sum() for output in evaluated)
-        loss.backward()
-        gradients = [parameter.grad for parameter in policy.parameters()]
-        outputs.append([actions, values, log_prob, *evaluated, policy.actor_latent(observations), *gradients])
-    for ours, theirs in zip(*outputs):
-        assert torch.equal(ours, theirs)
+def test_direct_layer_calls_give_stable_baselines3_s_own_numbers_and_gradients(kwargs):
+    policy = _policy(**kwargs)
+    assert policy._plain_layers() is not None, "the plain MLP must take the direct path, or this test compares nothing"
+    _assert_as_stable_baselines3(policy)
+    latent = policy.mlp_extractor.forward_actor(BaseModel.extract_features(policy, BATCH, policy.pi_features_extractor))
+    assert torch.equal(policy.actor_latent(BATCH), latent)
+
+
+def test_a_bounded_mean_under_gsde_keeps_the_distribution_s_centre_inside_the_bounds():
+    policy = _policy(use_sde=True, bounded_mean=True)
+    with torch.no_grad():
+        policy.action_net.bias.fill_(5.0)
+        distribution = policy.get_distribution(BATCH)
+    assert torch.equal(distribution.distribution.mean, torch.tanh(policy.action_net(policy.actor_latent(BATCH))))
+    assert distribution.distribution.mean.max() < 1.0
+
+
+def test_a_hook_or_a_swapped_layer_is_seen_as_stable_baselines3_would_see_it():
+    policy = _policy(bounded_mean=True)
+    handle = policy.mlp_extractor.policy_net[0].register_forward_hook(lambda module, args, output: output * 0.5)
+    assert policy._plain_layers() is None
+    _assert_as_stable_baselines3(policy)
+    handle.remove()
+    global_handle = torch.nn.modules.module.register_module_forward_hook(lambda module, args, output: None)
+    try:
+        assert policy._plain_layers() is None
+    finally:
+        global_handle.remove()
+    torch.manual_seed(2)
+    policy.mlp_extractor.value_net[0] = torch.nn.Linear(43, 64)  # surgery after construction
+    assert policy._plain_layers() is not None
+    _assert_as_stable_baselines3(policy)
 
 
 def test_a_network_the_direct_path_does_not_know_goes_through_stable_baselines3():
     from stable_baselines3.common.torch_layers import CombinedExtractor
 
-    space = gym.spaces.Dict({"state": OBSERVATIONS})
-    policy = NavActorCriticPolicy(space, ACTIONS, lambda _: 3e-4, features_extractor_class=CombinedExtractor)
-    assert policy._layers is None
-    actions, values, _ = policy({"state": torch.zeros(3, 43)})
-    assert actions.shape == (3, 2) and values.shape == (3, 1)
+    policy = _policy(gym.spaces.Dict({"state": OBSERVATIONS}), features_extractor_class=CombinedExtractor)
+    assert policy._plain_layers() is None
+    _assert_as_stable_baselines3(policy, {"state": BATCH})
+    policy = _policy(bounded_mean=True)
+    policy.direct_layer_calls = False
+    assert policy._plain_layers() is None
 
 
 def _weights(model) -> torch.Tensor:
@@ -66,6 +105,7 @@ def test_training_with_the_runner_s_settings_gives_the_same_weights_to_the_bit(a
         if algorithm is PPO:
             model = PPO(NavActorCriticPolicy, env, n_steps=256, batch_size=64, n_epochs=2, seed=0, device="cpu",
                         policy_kwargs={"bounded_mean": True})
+            model.policy.direct_layer_calls = runner_settings
         else:
             model = SAC("MlpPolicy", env, learning_starts=64, batch_size=32, seed=0, device="cpu",
                         policy_kwargs={"net_arch": [32, 32]})
@@ -74,8 +114,6 @@ def test_training_with_the_runner_s_settings_gives_the_same_weights_to_the_bit(a
             optimizers = [model.policy.optimizer] if algorithm is PPO else [model.actor.optimizer, model.critic.optimizer,
                                                                          model.ent_coef_optimizer]
             assert all(group["foreach"] for optimizer in optimizers for group in optimizer.param_groups)
-        elif algorithm is PPO:
-            model.policy._layers = None
         initial = _weights(model)
         model.learn(512)
         return initial, _weights(model)

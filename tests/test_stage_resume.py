@@ -52,3 +52,25 @@ def test_a_resumed_second_stage_writes_its_own_stage_index_and_seed(tmp_path):
     for name in ("checkpoints/last.zip", "best.zip", "policy.zip"):
         manifest = read_manifest(stage / name)
         assert (manifest["stage"], manifest["stage_index"], manifest["seed"]) == ("sparse", 1, SEED + 1), name
+
+
+def test_a_resumed_stage_steps_its_optimisers_together_after_loading_their_saved_state(tmp_path, monkeypatch):
+    # Loading an optimiser's state brings back its saved settings: the runner's faster ones must be
+    # set again afterwards (the numbers are the same either way, so only the order can show it).
+    from common.curriculum import runner as runner_module
+
+    config, out, calls = _config(), tmp_path / "run", []
+    for name in ("load_weights", "optimizers_step_together"):
+        original = getattr(runner_module, name)
+        monkeypatch.setattr(runner_module, name, lambda *args, _name=name, _original=original, **kwargs: (
+            calls.append(_name), _original(*args, **kwargs))[1])
+
+    def interrupt(row: dict) -> None:
+        if row["stage"] == "sparse":
+            raise _Interrupted
+
+    with pytest.raises(_Interrupted):
+        Runner(config, out, progress=False, on_evaluation=interrupt).run()
+    calls.clear()
+    Runner(config, out, resume=True, progress=False).run()
+    assert calls == ["load_weights", "optimizers_step_together"]
