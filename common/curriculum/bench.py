@@ -235,6 +235,28 @@ def ppo_runner_and_stock_steps_per_s(kind: str = "sparse", rollouts: int = 30, s
     return rollouts * 2048 / spent[0], rollouts * 2048 / spent[1]
 
 
+def ppo_kinds_steps_per_s(kinds: Sequence[str] = ("sparse", "cluttered"), rollouts: int = 30,
+                          seed: int = 0) -> dict[str, tuple[float, float]]:
+    """For each generator kind, env steps per CPU second of the main job's PPO as the runner trains
+    it (:func:`_main_job_ppo`, one process) and the share of that time spent collecting rollouts,
+    one model per kind, the models taking turns rollout by rollout (2,048 steps and their update
+    each), so a noisy machine's swings fall on every kind alike."""
+    spent = {kind: {"collect_rollouts": 0.0, "train": 0.0} for kind in kinds}
+    total = dict.fromkeys(kinds, 0.0)
+    with contextlib.ExitStack() as stack:
+        models = {kind: stack.enter_context(_main_job_ppo(kind, seed)) for kind in kinds}
+        for kind, model in models.items():
+            for name in spent[kind]:
+                setattr(model, name, _timed(getattr(model, name), spent[kind], name))
+        for _ in range(rollouts):
+            for kind, model in models.items():
+                start = cpu_seconds()
+                model.learn(2048, reset_num_timesteps=False)
+                total[kind] += cpu_seconds() - start
+    return {kind: (rollouts * 2048 / total[kind], spent[kind]["collect_rollouts"] / sum(spent[kind].values()))
+            for kind in kinds}
+
+
 def planner_pairs(scenario: Scenario, grid: OccupancyGrid, count: int = 20, seed: int = 0,
                   min_distance: float = 2.0) -> list[tuple[tuple[float, float], tuple[float, float]]]:
     """The scenario's start and goal, then free-cell centre pairs of the start's free component
@@ -584,15 +606,19 @@ def _timed(method, spent: dict[str, float], name: str):
 
 
 def _ppo_figures(steps: int) -> dict[str, float]:
-    # Each setting's best of two, alternated: one round of these few-second runs swung the ratio
-    # from 0.96 to 0.80 between two benches of the same code on this noisy machine.
-    settings = (("sparse", "dummy"), ("cluttered", "dummy"), ("cluttered", "subproc"))
-    fastest = fastest_alternated({f"{kind} {vec_env}": lambda kind=kind, vec_env=vec_env: ppo_steps_per_s(
-        kind, steps, vec_env=vec_env) for kind, vec_env in settings}, runs=2)
-    (sparse, sparse_share), (cluttered, cluttered_share), (subproc, _) = fastest.values()
-    runner, stock = ppo_runner_and_stock_steps_per_s(rollouts=max(1, steps // 1024))
+    # Rollout by rollout in one process where the clock is the CPU's; one process per env (whose
+    # work is in other processes) against one process by the wall clock, each setting's best of
+    # two alternated runs: one round of those few-second runs swung a ratio from 0.96 to 0.80
+    # between two benches of the same code on this noisy machine.
+    rollouts = max(1, steps // 1024)
+    kinds = ppo_kinds_steps_per_s(("sparse", "cluttered"), rollouts)
+    (sparse, sparse_share), (cluttered, cluttered_share) = kinds["sparse"], kinds["cluttered"]
+    fastest = fastest_alternated({vec_env: lambda vec_env=vec_env: ppo_steps_per_s("cluttered", steps, vec_env=vec_env)
+                                  for vec_env in ("dummy", "subproc")}, runs=2)
+    (dummy, _), (subproc, _) = fastest["dummy"], fastest["subproc"]
+    runner, stock = ppo_runner_and_stock_steps_per_s(rollouts=rollouts)
     return {"ppo_steps_per_s_sparse": round(sparse, 1), "ppo_steps_per_s_cluttered": round(cluttered, 1),
             "ppo_cluttered_vs_sparse": round(cluttered / sparse, 3),
-            "ppo_steps_per_s_cluttered_subproc": round(subproc, 1), "ppo_subproc_vs_dummy": round(subproc / cluttered, 3),
+            "ppo_steps_per_s_cluttered_subproc": round(subproc, 1), "ppo_subproc_vs_dummy": round(subproc / dummy, 3),
             "ppo_rollout_share_sparse": round(sparse_share, 3), "ppo_rollout_share_cluttered": round(cluttered_share, 3),
             "ppo_stock_steps_per_s_sparse": round(stock, 1), "ppo_vs_stock_sparse": round(runner / stock, 3)}
