@@ -145,9 +145,10 @@ def _encode(out, x, y, yaw, goal_x, goal_y, scale, v, w, yaw_rate, ranges, bound
     with ``log_scale`` > 0, log(max(r, floor) / floor) * log_scale; then clip all of ``out`` into
     [low, high]. One compiled call: element writes from Python cost more than the sectors, and the
     pose and goal come as floats because a tuple argument costs the call more than a float each.
-    The rounding follows the NumPy code it replaced (log in float64, the scale in float32), identical where the C library's log and NumPy's agree (on this project's machine,
-    on a million values; NumPy's own SIMD log on AVX-512 may differ in the last bit). Unlike
-    np.minimum/maximum, the clip does not pass NaN through: no lidar here returns one."""
+    The rounding follows the NumPy code it replaced (log in float64, the scale in float32),
+    identical where the C library's log and NumPy's agree (on this project's machine, on a million
+    values; NumPy's own SIMD log on AVX-512 may differ in the last bit). Unlike np.minimum/maximum,
+    the clip does not pass NaN through: no lidar here returns one."""
     n = out.shape[0]
     first = n - 1 - bounds.shape[0]
     out[0], out[1], out[2], out[n - 1] = goal_terms(x, y, yaw, goal_x, goal_y, scale)

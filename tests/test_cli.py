@@ -154,7 +154,7 @@ def test_bench_json_has_the_agreed_keys(capsys, monkeypatch, tmp_path):
 def test_bench_reads_each_ppo_figure_from_the_measure_made_for_it(monkeypatch):
     from common.curriculum import bench
 
-    measured = iter([(100.0, 0.5), (60.0, 0.1), (80.0, 0.6), (90.0, 0.9)])
+    measured = iter([100.0, 60.0, 80.0, 90.0])
     order = []
 
     def fake(kind, steps, seed=0, vec_env="dummy"):

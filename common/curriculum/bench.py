@@ -197,64 +197,65 @@ def _train_as(model, stock: bool) -> None:
 
     torch.distributions.Distribution.set_default_validate_args(stock)
     model.policy.direct_layer_calls = not stock
-    if stock:
-        for group in model.policy.optimizer.param_groups:
-            group["foreach"] = None
-    else:
-        optimizers_step_together(model)
+    optimizers_step_together(model, together=not stock)
 
 
-def ppo_steps_per_s(kind: str, steps: int = 16_384, seed: int = 0, vec_env: str = "dummy") -> tuple[float, float]:
-    """PPO's training throughput (env steps per second, learner included) with the main job's
-    settings as the runner trains it (:func:`_main_job_ppo`), and the share of that time spent
-    collecting rollouts (the envs and the policy's forward passes) rather than in gradient updates.
-    ``vec_env``: ``dummy`` (one process) or ``subproc`` (one process per env), as a stage's
+def ppo_steps_per_s(kind: str, steps: int = 16_384, seed: int = 0, vec_env: str = "dummy") -> float:
+    """PPO's training throughput (env steps per wall-clock second, learner included) with the main
+    job's settings as the runner trains it (:func:`_main_job_ppo`). ``vec_env``: ``dummy`` (one
+    process) or ``subproc`` (one process per env, whose work the wall clock sees), as a stage's
     ``vec_env``."""
     with _main_job_ppo(kind, seed, vec_env) as model:
-        spent = {"collect_rollouts": 0.0, "train": 0.0}
-        for name in spent:
-            setattr(model, name, _timed(getattr(model, name), spent, name))
         start = time.perf_counter()
         model.learn(steps, reset_num_timesteps=False)
-        return steps / (time.perf_counter() - start), spent["collect_rollouts"] / sum(spent.values())
+        return steps / (time.perf_counter() - start)
+
+
+def _cpu_seconds_taking_turns(turns: Sequence[Callable[[], None]], rounds: int) -> list[float]:
+    """CPU seconds each of ``turns`` took, called one after another ``rounds`` times, so a noisy
+    machine's swings fall on every turn alike."""
+    spent = [0.0] * len(turns)
+    for _ in range(rounds):
+        for i, turn in enumerate(turns):
+            start = cpu_seconds()
+            turn()
+            spent[i] += cpu_seconds() - start
+    return spent
+
+
+def _rollout(model, stock: bool | None = None) -> None:
+    """One rollout of 2,048 steps and its update (trained the stock way or the runner's, if given)."""
+    if stock is not None:
+        _train_as(model, stock)
+    model.learn(2048, reset_num_timesteps=False)
 
 
 def ppo_runner_and_stock_steps_per_s(kind: str = "sparse", rollouts: int = 30, seed: int = 0) -> tuple[float, float]:
     """Env steps per CPU second of the main job's PPO trained as the runner trains it and as
-    stable-baselines3 and torch do by default (:func:`_train_as`), the two alternating rollout by
-    rollout (2,048 steps and their update each) in one model: the same arithmetic, so one
-    trajectory, and a noisy machine's swings fall on both alike. Separate runs of a few seconds each
-    read ratios from 0.93 to 1.29 within two hours for a difference of a few percent."""
-    spent = [0.0, 0.0]
+    stable-baselines3 and torch do by default (:func:`_train_as`), the two taking turns rollout by
+    rollout in one model: the same arithmetic, so one trajectory. Separate runs of a few seconds
+    each read ratios from 0.93 to 1.29 within two hours for a difference of a few percent."""
     with _main_job_ppo(kind, seed) as model:
-        for k in range(2 * rollouts):
-            _train_as(model, stock=bool(k % 2))
-            start = cpu_seconds()
-            model.learn(2048, reset_num_timesteps=False)
-            spent[k % 2] += cpu_seconds() - start
-    return rollouts * 2048 / spent[0], rollouts * 2048 / spent[1]
+        runner, stock = _cpu_seconds_taking_turns([lambda: _rollout(model, False), lambda: _rollout(model, True)],
+                                                  rollouts)
+    return rollouts * 2048 / runner, rollouts * 2048 / stock
 
 
 def ppo_kinds_steps_per_s(kinds: Sequence[str] = ("sparse", "cluttered"), rollouts: int = 30,
                           seed: int = 0) -> dict[str, tuple[float, float]]:
     """For each generator kind, env steps per CPU second of the main job's PPO as the runner trains
-    it (:func:`_main_job_ppo`, one process) and the share of that time spent collecting rollouts,
-    one model per kind, the models taking turns rollout by rollout (2,048 steps and their update
-    each), so a noisy machine's swings fall on every kind alike."""
+    it (:func:`_main_job_ppo`, one process) and the share of that time spent collecting rollouts
+    (the envs and the policy's forward passes) rather than in gradient updates: one model per
+    kind, the models taking turns rollout by rollout."""
     spent = {kind: {"collect_rollouts": 0.0, "train": 0.0} for kind in kinds}
-    total = dict.fromkeys(kinds, 0.0)
     with contextlib.ExitStack() as stack:
         models = {kind: stack.enter_context(_main_job_ppo(kind, seed)) for kind in kinds}
         for kind, model in models.items():
             for name in spent[kind]:
                 setattr(model, name, _timed(getattr(model, name), spent[kind], name))
-        for _ in range(rollouts):
-            for kind, model in models.items():
-                start = cpu_seconds()
-                model.learn(2048, reset_num_timesteps=False)
-                total[kind] += cpu_seconds() - start
-    return {kind: (rollouts * 2048 / total[kind], spent[kind]["collect_rollouts"] / sum(spent[kind].values()))
-            for kind in kinds}
+        total = _cpu_seconds_taking_turns([lambda model=model: _rollout(model) for model in models.values()], rollouts)
+    return {kind: (rollouts * 2048 / seconds, spent[kind]["collect_rollouts"] / sum(spent[kind].values()))
+            for kind, seconds in zip(kinds, total)}
 
 
 def planner_pairs(scenario: Scenario, grid: OccupancyGrid, count: int = 20, seed: int = 0,
@@ -595,12 +596,13 @@ def run_benchmarks(steps: int = 20_000) -> dict[str, Any]:
 
 
 def _timed(method, spent: dict[str, float], name: str):
+    """``method``, adding the CPU seconds each call takes to ``spent[name]``."""
     def wrapper(*args, **kwargs):
-        began = time.perf_counter()
+        began = cpu_seconds()
         try:
             return method(*args, **kwargs)
         finally:
-            spent[name] += time.perf_counter() - began
+            spent[name] += cpu_seconds() - began
 
     return wrapper
 
@@ -615,7 +617,7 @@ def _ppo_figures(steps: int) -> dict[str, float]:
     (sparse, sparse_share), (cluttered, cluttered_share) = kinds["sparse"], kinds["cluttered"]
     fastest = fastest_alternated({vec_env: lambda vec_env=vec_env: ppo_steps_per_s("cluttered", steps, vec_env=vec_env)
                                   for vec_env in ("dummy", "subproc")}, runs=2)
-    (dummy, _), (subproc, _) = fastest["dummy"], fastest["subproc"]
+    dummy, subproc = fastest["dummy"], fastest["subproc"]
     runner, stock = ppo_runner_and_stock_steps_per_s(rollouts=rollouts)
     return {"ppo_steps_per_s_sparse": round(sparse, 1), "ppo_steps_per_s_cluttered": round(cluttered, 1),
             "ppo_cluttered_vs_sparse": round(cluttered / sparse, 3),

@@ -433,12 +433,12 @@ def _add_scenario_source(parser: argparse.ArgumentParser, episodes: int | None) 
     source.add_argument("--scenario-file", metavar="FILE", help="a scenario or IR-SIM world YAML")
     parser.set_defaults(default_episodes=episodes)
     if episodes is not None:
-        parser.add_argument("--episodes", type=_whole(1, 1_000_000),
+        parser.add_argument("--episodes", type=whole_number(1, 1_000_000),
                             help=f"episodes (default: as many as a policy's own test figure, else {episodes})")
-    parser.add_argument("--seed", type=_whole(0, 2**32 - 1),
+    parser.add_argument("--seed", type=whole_number(0, 2**32 - 1),
                         help="shifts the suite's base seed and the noise seeds, 0 to 2^32 - 1 (default: a "
                              "policy's own test draw's, else 0)")
-    parser.add_argument("--max-steps", type=_whole(1, 1_000_000), default=None,
+    parser.add_argument("--max-steps", type=whole_number(1, 1_000_000), default=None,
                         help="steps before a timeout (default: a policy's own episode length, else 500)")
     parser.add_argument("--goal-threshold", type=_metres, metavar="M",
                         help="judge arrival within M metres (default: the radius a policy trained for, else each scenario's)")
@@ -448,11 +448,11 @@ def _add_scenario_source(parser: argparse.ArgumentParser, episodes: int | None) 
 
 
 def _add_jobs(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--jobs", type=_whole(1, 1024), default=1, metavar="N",
+    parser.add_argument("--jobs", type=whole_number(1, 1024), default=1, metavar="N",
                         help="worker processes that run the episodes (default 1); every N gives the same figures")
 
 
-def _whole(low: int, high: int) -> Callable[[str], int]:
+def whole_number(low: int, high: int) -> Callable[[str], int]:
     """An argparse type: a whole number in [low, high] (argparse names the flag in its message)."""
 
     def parse(text: str) -> int:
@@ -513,13 +513,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     sweep = commands.add_parser("sweep", help="a curriculum over seeds, or a search, as Ray Tune trials (local or a cluster)")
     sweep.add_argument("file", metavar="FILE.yaml")
-    sweep.add_argument("--seeds", type=_whole(1, 1000), default=1, help="runs with seeds SEED + 1000·k (default 1)")
+    sweep.add_argument("--seeds", type=whole_number(1, 1000), default=1, help="runs with seeds SEED + 1000·k (default 1)")
     sweep.add_argument("--space", metavar="SPACE.yaml", help="a search space: dotted curriculum paths -> distributions")
-    sweep.add_argument("--trials", type=_whole(1, 10_000), default=8, help="trials of a search (default 8)")
+    sweep.add_argument("--trials", type=whole_number(1, 10_000), default=8, help="trials of a search (default 8)")
     sweep.add_argument("--metric", default="success_rate", choices=["success_rate", "spl"], help="what a search maximises")
     sweep.add_argument("--address", metavar="HOST:PORT", help="an existing Ray cluster (default: a local one, in-process)")
     sweep.add_argument("--cpus-per-trial", type=float, default=1.0, metavar="K", help="CPUs each trial holds (default 1)")
-    sweep.add_argument("--max-failures", type=_whole(0, 100), default=2, metavar="F",
+    sweep.add_argument("--max-failures", type=whole_number(0, 100), default=2, metavar="F",
                        help="retries of a trial whose process dies (default 2)")
     sweep.add_argument("--out", metavar="DIR", help="sweep directory (default runs/sweeps/NAME)")
     sweep.add_argument("--resume", action="store_true", help="continue an interrupted sweep")
@@ -541,7 +541,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     bench = commands.add_parser("bench", help="measure simulator speed against references in the same run")
     bench.add_argument("--json", action="store_true", help="print one JSON object")
-    bench.add_argument("--steps", type=_whole(100, 10_000_000),
+    bench.add_argument("--steps", type=whole_number(100, 10_000_000),
                        help="steps to time, at least 100: flatland's (default 20,000; IR-SIM runs a tenth), or "
                             "the GUI's with --gui (default 300)")
     bench.add_argument("--gui", action="store_true",
@@ -560,12 +560,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     render = commands.add_parser("render", help="record one episode of an agent as a GIF (and an odometry-drift plot)")
     _add_scenario_source(render, episodes=None)
-    render.add_argument("--index", type=_whole(0, 1_000_000), default=0,
+    render.add_argument("--index", type=whole_number(0, 1_000_000), default=0,
                         help="which scenario of the suite or file draw (default 0)")
     render.add_argument("--agent", default="pid_blend",
                         help="a controller name, a policy zip or an exported .onnx (default pid_blend)")
     render.add_argument("--out", default="episode.gif", help="the GIF to write (default episode.gif)")
-    render.add_argument("--every", type=_whole(1, 1000), default=1, help="keep every k-th frame (default 1)")
+    render.add_argument("--every", type=whole_number(1, 1000), default=1, help="keep every k-th frame (default 1)")
     render.add_argument("--drift", metavar="PNG", help="also plot the true path against wheel odometry")
     render.set_defaults(handler=_render)
 

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from common.conditions import Conditions, conditions_of
-from common.curriculum.cli import _whole
+from common.curriculum.cli import whole_number
 from common.curriculum.policy import load_policy
 from common.evaluation import Summary, episode_limit, evaluate
 from common.generators import Suite, get_suite
@@ -119,7 +119,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--episodes", type=int, default=200)
     parser.add_argument("--suites", default="sparse,cluttered", help="comma-separated suites, or crowd_sfm, crowd_orca")
     parser.add_argument("--policy", nargs="*", metavar="ZIP", help="default: the shipped 2D policies")
-    parser.add_argument("--jobs", type=_whole(1, 1024), default=1, help="worker processes for the episodes (the same figures)")
+    parser.add_argument("--jobs", type=whole_number(1, 1024), default=1, help="worker processes for the episodes (the same figures)")
     args = parser.parse_args(argv)
     policies = args.policy or [str(SHIPPED / f"{name}.zip") for name in SHIPPED_2D]
     print("| policy | suite | flatland success (95% CI) | IR-SIM success (95% CI) | difference, points "

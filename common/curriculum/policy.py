@@ -56,11 +56,11 @@ class NavActorCriticPolicy(ActorCriticPolicy):
     deterministic action then stays at the bound (full speed beside an obstacle, or standing
     still where training's noise would have crept on; docs/training.md). A bounded mean keeps
     the distribution's centre inside the actions it can take. The network and its weights are
-    SB3's own: only where the mean is read changes, and (:meth:`latents`) how its layers are
-    called, which changes the time and not a bit of the result.
+    SB3's own: only where the mean is read changes, and (:meth:`_plain_layers`) how its layers
+    are called, which changes the time and not a bit of the result.
     """
 
-    #: Whether :meth:`latents` may call the plain MLP's layers directly (False: always through
+    #: Whether the plain MLP's layers may be called directly (:meth:`_plain_layers`; False: always through
     #: stable-baselines3's module calls; the numbers are the same either way).
     direct_layer_calls = True
 
@@ -71,35 +71,44 @@ class NavActorCriticPolicy(ActorCriticPolicy):
 
         self._plain_types = frozenset((nn.Linear, *activation_classes().values()))
 
-    def latents(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """The actor's and the critic's latent codes of a batch of observations, as stable-baselines3
-        computes them, to the bit. Where the network is its plain MLP over flat vector observations
-        and nothing hooks into it (:meth:`_plain_layers`, asked at every call), the layers' own
-        ``forward`` run one after another: calling each module through ``nn.Module.__call__`` was
-        60% of the forward pass of a batch of eight, 61 µs of 146, once per rollout step and minibatch."""
+    def forward(self, obs: torch.Tensor, deterministic: bool = False) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         layers = self._plain_layers()
         if layers is None:
-            features = self.extract_features(obs)
-            if self.share_features_extractor:
-                return self.mlp_extractor(features)
-            return self.mlp_extractor.forward_actor(features[0]), self.mlp_extractor.forward_critic(features[1])
+            return super().forward(obs, deterministic)
         features = _flat(obs)
-        return _through(layers[0], features), _through(layers[1], features)
+        latent_pi, latent_vf = _through(layers[0], features), _through(layers[1], features)
+        values = self.value_net(latent_vf)
+        distribution = self._get_action_dist_from_latent(latent_pi)
+        actions = distribution.get_actions(deterministic=deterministic)
+        log_prob = distribution.log_prob(actions)
+        return actions.reshape((-1, *self.action_space.shape)), values, log_prob
+
+    def evaluate_actions(self, obs: torch.Tensor, actions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        layers = self._plain_layers()
+        if layers is None:
+            return super().evaluate_actions(obs, actions)
+        features = _flat(obs)
+        distribution = self._get_action_dist_from_latent(_through(layers[0], features))
+        log_prob = distribution.log_prob(actions)
+        return self.value_net(_through(layers[1], features)), log_prob, distribution.entropy()
 
     def actor_latent(self, obs: torch.Tensor) -> torch.Tensor:
-        """The actor's latent code alone (what its action reads), as :meth:`latents` computes it."""
+        """The actor's latent code (what its action reads), as stable-baselines3 computes it."""
         layers = self._plain_layers()
         if layers is None:
             return self.mlp_extractor.forward_actor(BaseModel.extract_features(self, obs, self.pi_features_extractor))
         return _through(layers[0], _flat(obs))
 
-    def _plain_layers(self) -> tuple[tuple[Callable, ...], tuple[Callable, ...]] | None:
-        """The ``forward`` methods of the actor's and the critic's hidden layers, in order, where this
-        is stable-baselines3's plain MLP as it is now: flat Box observations, flattening feature
-        extractors, layers of ``nn.Linear`` and the activations a curriculum may name, and no hook on
-        any of them nor a global one. None otherwise: then stable-baselines3's own calls run (a custom
-        extractor, a layer swapped in, a hook registered since construction). 7 µs on a slow hour of
-        this machine, against the 61 µs the direct calls save."""
+    def _plain_layers(self) -> tuple[tuple[nn.Module, ...], tuple[nn.Module, ...]] | None:
+        """The actor's and the critic's hidden layers, in order, where this is stable-baselines3's
+        plain MLP as it is now: flat Box observations, flattening feature extractors, layers of
+        ``nn.Linear`` and the activations a curriculum may name, and no hook on any of them nor a
+        global one. Then :meth:`forward`, :meth:`evaluate_actions` and :meth:`actor_latent` run the
+        layers' own ``forward`` one after another, to the same bit as stable-baselines3: calling
+        each module through ``nn.Module.__call__`` was 60% of the forward pass of a batch of eight,
+        61 µs of 146, once per rollout step and minibatch. None otherwise (a custom extractor, a
+        layer swapped in, a hook registered since construction): stable-baselines3's own calls run.
+        Asked at every call: 5–7 µs in a slow hour of this machine."""
         if not self.direct_layer_calls:
             return None
         # Through _modules: nn.Module.__getattr__ would cost more than the rest of the check.
@@ -111,24 +120,10 @@ class NavActorCriticPolicy(ActorCriticPolicy):
         actor, critic = mlp._modules["policy_net"], mlp._modules["value_net"]
         actor_layers, critic_layers = tuple(actor._modules.values()), tuple(critic._modules.values())
         plain = self._plain_types
-        if (any(type(layer) not in plain for layer in actor_layers) or any(type(layer) not in plain for layer in critic_layers)
+        if (any(type(layer) not in plain for layer in actor_layers + critic_layers)
                 or _hooked((mlp, actor, critic, pi_extractor, vf_extractor, *actor_layers, *critic_layers))):
             return None
-        return tuple(layer.forward for layer in actor_layers), tuple(layer.forward for layer in critic_layers)
-
-    def forward(self, obs: torch.Tensor, deterministic: bool = False) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        latent_pi, latent_vf = self.latents(obs)
-        values = self.value_net(latent_vf)
-        distribution = self._get_action_dist_from_latent(latent_pi)
-        actions = distribution.get_actions(deterministic=deterministic)
-        log_prob = distribution.log_prob(actions)
-        return actions.reshape((-1, *self.action_space.shape)), values, log_prob
-
-    def evaluate_actions(self, obs: torch.Tensor, actions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
-        latent_pi, latent_vf = self.latents(obs)
-        distribution = self._get_action_dist_from_latent(latent_pi)
-        log_prob = distribution.log_prob(actions)
-        return self.value_net(latent_vf), log_prob, distribution.entropy()
+        return actor_layers, critic_layers
 
     def mean_actions(self, latent_pi: torch.Tensor) -> torch.Tensor:
         """The Gaussian's mean, bounded where ``bounded_mean``: its deterministic action."""
@@ -158,9 +153,9 @@ def _flat(obs: torch.Tensor) -> torch.Tensor:
     return obs.float().flatten(1)
 
 
-def _through(layers: tuple[Callable, ...], x: torch.Tensor) -> torch.Tensor:
+def _through(layers: tuple[nn.Module, ...], x: torch.Tensor) -> torch.Tensor:
     for layer in layers:
-        x = layer(x)
+        x = layer.forward(x)
     return x
 
 
@@ -429,18 +424,19 @@ def _optimizer_state_fits(optimizer) -> bool:
     return True
 
 
-def optimizers_step_together(model) -> None:
+def optimizers_step_together(model, together: bool = True) -> None:
     """Make a CPU model's optimisers update all their tensors with one call per operation
     (torch's ``foreach`` kernels, the default only on CUDA): the same arithmetic, the same weights
-    to the bit, and Adam's step 22% faster on PPO's two 64 × 64 networks (389 µs against 496). Call
-    it again after loading optimiser states, which bring back the saved settings."""
+    to the bit, and Adam's step 22% faster on PPO's two 64 × 64 networks (389 µs against 496).
+    Call it again after loading optimiser states, which bring back the saved settings.
+    ``together=False`` hands the choice back to torch (its default)."""
     if model.device.type != "cpu":
         return
     for name in model._get_torch_save_params()[0]:
         optimizer = _attribute(model, name)
         if isinstance(optimizer, torch.optim.Optimizer):
             for group in optimizer.param_groups:
-                group["foreach"] = True
+                group["foreach"] = True if together else None
 
 
 def _attribute(model, dotted: str):
