@@ -39,6 +39,11 @@ def _assert_as_stable_baselines3(policy: NavActorCriticPolicy, observations=BATC
     assert len(ours) == len(theirs)
     for mine, reference in zip(ours, theirs):
         assert torch.equal(mine, reference)
+    with torch.no_grad():
+        deterministic = [NavActorCriticPolicy.forward(policy, observations, deterministic=True),
+                         ActorCriticPolicy.forward(policy, observations, deterministic=True)]
+    for mine, reference in zip(*deterministic):
+        assert torch.equal(mine, reference)
 
 
 @pytest.mark.parametrize("kwargs", [
@@ -68,10 +73,11 @@ def test_a_bounded_mean_under_gsde_keeps_the_distribution_s_centre_inside_the_bo
 
 def test_a_hook_or_a_swapped_layer_is_seen_as_stable_baselines3_would_see_it():
     policy = _policy(bounded_mean=True)
-    handle = policy.mlp_extractor.policy_net[0].register_forward_hook(lambda module, args, output: output * 0.5)
-    assert policy._plain_layers() is None
-    _assert_as_stable_baselines3(policy)
-    handle.remove()
+    for layer in (policy.mlp_extractor.policy_net[0], policy.value_net, policy.action_net):
+        handle = layer.register_forward_hook(lambda module, args, output: output * 0.5)
+        assert policy._plain_layers() is None
+        _assert_as_stable_baselines3(policy)
+        handle.remove()
     global_handle = torch.nn.modules.module.register_module_forward_hook(lambda module, args, output: None)
     try:
         assert policy._plain_layers() is None

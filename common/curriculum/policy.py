@@ -11,12 +11,13 @@ load weights the same way into a model built from the curriculum's own hyperpara
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 import torch
-from stable_baselines3.common.distributions import StateDependentNoiseDistribution
+from stable_baselines3.common.distributions import DiagGaussianDistribution, StateDependentNoiseDistribution
 from stable_baselines3.common.policies import ActorCriticPolicy, BaseModel
 from stable_baselines3.common.torch_layers import FlattenExtractor, MlpExtractor
 from torch import nn
@@ -76,11 +77,16 @@ class NavActorCriticPolicy(ActorCriticPolicy):
         if layers is None:
             return super().forward(obs, deterministic)
         features = _flat(obs)
-        latent_pi, latent_vf = _through(layers[0], features), _through(layers[1], features)
-        values = self.value_net(latent_vf)
-        distribution = self._get_action_dist_from_latent(latent_pi)
-        actions = distribution.get_actions(deterministic=deterministic)
-        log_prob = distribution.log_prob(actions)
+        latent_pi, values = _through(layers[0], features), _through(layers[1], features)
+        if self._plain_gaussian():
+            mean, std = self._gaussian(latent_pi)
+            # Normal.rsample's draw, without building the distribution around it.
+            actions = mean if deterministic else mean + torch.empty(mean.shape, dtype=mean.dtype, device=mean.device).normal_() * std
+            log_prob = _gaussian_log_prob(actions, mean, std)
+        else:
+            distribution = self._get_action_dist_from_latent(latent_pi)
+            actions = distribution.get_actions(deterministic=deterministic)
+            log_prob = distribution.log_prob(actions)
         return actions.reshape((-1, *self.action_space.shape)), values, log_prob
 
     def evaluate_actions(self, obs: torch.Tensor, actions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
@@ -88,9 +94,12 @@ class NavActorCriticPolicy(ActorCriticPolicy):
         if layers is None:
             return super().evaluate_actions(obs, actions)
         features = _flat(obs)
-        distribution = self._get_action_dist_from_latent(_through(layers[0], features))
-        log_prob = distribution.log_prob(actions)
-        return self.value_net(_through(layers[1], features)), log_prob, distribution.entropy()
+        latent_pi, values = _through(layers[0], features), _through(layers[1], features)
+        if self._plain_gaussian():
+            mean, std = self._gaussian(latent_pi)
+            return values, _gaussian_log_prob(actions, mean, std), _gaussian_entropy(std)
+        distribution = self._get_action_dist_from_latent(latent_pi)
+        return values, distribution.log_prob(actions), distribution.entropy()
 
     def actor_latent(self, obs: torch.Tensor) -> torch.Tensor:
         """The actor's latent code (what its action reads), as stable-baselines3 computes it."""
@@ -100,10 +109,10 @@ class NavActorCriticPolicy(ActorCriticPolicy):
         return _through(layers[0], _flat(obs))
 
     def _plain_layers(self) -> tuple[tuple[nn.Module, ...], tuple[nn.Module, ...]] | None:
-        """The actor's and the critic's hidden layers, in order, where this is stable-baselines3's
-        plain MLP as it is now: flat Box observations, flattening feature extractors, layers of
-        ``nn.Linear`` and the activations a curriculum may name, and no hook on any of them nor a
-        global one. Then :meth:`forward`, :meth:`evaluate_actions` and :meth:`actor_latent` run the
+        """The actor's hidden layers and the critic's (ending in its value head), in order, where
+        this is stable-baselines3's plain MLP as it is now: flat Box observations, flattening
+        feature extractors, layers of ``nn.Linear`` and the activations a curriculum may name, a
+        linear mean head, and no hook on any of them nor a global one. Then :meth:`forward`, :meth:`evaluate_actions` and :meth:`actor_latent` run the
         layers' own ``forward`` one after another, to the same bit as stable-baselines3: calling
         each module through ``nn.Module.__call__`` was 60% of the forward pass of a batch of eight,
         61 µs of 146, once per rollout step and minibatch. None otherwise (a custom extractor, a
@@ -118,17 +127,32 @@ class NavActorCriticPolicy(ActorCriticPolicy):
                 or type(vf_extractor) is not FlattenExtractor or len(self.observation_space.shape) != 1):
             return None
         actor, critic = mlp._modules["policy_net"], mlp._modules["value_net"]
-        actor_layers, critic_layers = tuple(actor._modules.values()), tuple(critic._modules.values())
-        plain = self._plain_types
-        if (any(type(layer) not in plain for layer in actor_layers + critic_layers)
-                or _hooked((mlp, actor, critic, pi_extractor, vf_extractor, *actor_layers, *critic_layers))):
+        actor_layers, critic_layers = tuple(actor._modules.values()), (*critic._modules.values(), own["value_net"])
+        mean_head, plain = own["action_net"], self._plain_types
+        if (any(type(layer) not in plain for layer in actor_layers + critic_layers) or type(mean_head) is not nn.Linear
+                or _hooked((mlp, actor, critic, pi_extractor, vf_extractor, mean_head, *actor_layers, *critic_layers))):
             return None
         return actor_layers, critic_layers
 
     def mean_actions(self, latent_pi: torch.Tensor) -> torch.Tensor:
         """The Gaussian's mean, bounded where ``bounded_mean``: its deterministic action."""
-        mean = self.action_net(latent_pi)
+        return self._bounded(self.action_net(latent_pi))
+
+    def _bounded(self, mean: torch.Tensor) -> torch.Tensor:
         return torch.tanh(mean) if self.bounded_mean else mean
+
+    def _plain_gaussian(self) -> bool:
+        """Whether the actions are stable-baselines3's diagonal Gaussian (not gSDE, not another
+        distribution): then :func:`_gaussian_log_prob` and :func:`_gaussian_entropy` give its
+        numbers to the bit without building torch's ``Normal`` around them, which with SB3's
+        bookkeeping took about 40% of a rollout step's forward pass for a batch of eight."""
+        return type(self.action_dist) is DiagGaussianDistribution
+
+    def _gaussian(self, latent_pi: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The Gaussian's mean and standard deviation, as DiagGaussianDistribution makes them (the
+        mean head called directly: :meth:`_plain_layers` has checked it is a plain layer)."""
+        mean = self._bounded(self._modules["action_net"].forward(latent_pi))
+        return mean, torch.ones_like(mean) * self.log_std.exp()
 
     def _get_action_dist_from_latent(self, latent_pi: torch.Tensor):
         if not self.bounded_mean:
@@ -151,6 +175,20 @@ def _hooked(modules: tuple[nn.Module, ...]) -> bool:
 def _flat(obs: torch.Tensor) -> torch.Tensor:
     """What stable-baselines3's preprocessing of a Box and its FlattenExtractor make of ``obs``."""
     return obs.float().flatten(1)
+
+
+_LOG_SQRT_2PI = math.log(math.sqrt(2 * math.pi))
+
+
+def _gaussian_log_prob(actions: torch.Tensor, mean: torch.Tensor, std: torch.Tensor) -> torch.Tensor:
+    """Normal(mean, std).log_prob(actions) summed over the action's dimensions, in torch's own
+    operations and order (so the same bits and gradients)."""
+    return (-((actions - mean) ** 2) / (2 * std**2) - std.log() - _LOG_SQRT_2PI).sum(dim=1)
+
+
+def _gaussian_entropy(std: torch.Tensor) -> torch.Tensor:
+    """Normal(mean, std).entropy() summed over the action's dimensions, as torch computes it."""
+    return (0.5 + 0.5 * math.log(2 * math.pi) + torch.log(std)).sum(dim=1)
 
 
 def _through(layers: tuple[nn.Module, ...], x: torch.Tensor) -> torch.Tensor:
@@ -190,7 +228,6 @@ def mean_action(policy) -> Callable[[torch.Tensor], torch.Tensor] | None:
     """The layers that compute ``policy``'s deterministic action, skipping the distribution built
     around them: PPO's Gaussian mean (through tanh where ``bounded_mean``), SAC's squashed mean,
     TD3's actor. None where the mode is not that mean alone (gSDE, another distribution)."""
-    from stable_baselines3.common.distributions import DiagGaussianDistribution
     from stable_baselines3.sac.policies import SACPolicy
     from stable_baselines3.td3.policies import TD3Policy
 
