@@ -69,13 +69,8 @@ long as anything is within its bounding circle). Then the robot itself:
 48    1 for a box footprint, 0 for a circle                                 0    1
 ====  ==================================================================  ====  ===
 
-``lidar103_robot``: ``lidar49_robot`` with 90 sectors of 4° rather than 36 of 10°, for gaps a
-little wider than the robot (a gap of 0.29 m subtends 17° at 1 m: within 10° sectors that take in
-a post's edge it need not read open at all). Entries 0-5 as above, 6-95 the sectors, 96 the goal
-distance, 97-102 the robot's entries.
-
-A lidar with other than 36 beams (90 for ``lidar103_robot``) is reduced to that many sectors of
-consecutive beams, each reading its nearest return. Values are clipped into the bounds (sensor noise may push them out).
+A lidar with other than 36 beams is reduced to 36 sectors of consecutive beams, each reading its
+nearest return. Values are clipped into the bounds (sensor noise may push them out).
 """
 
 from __future__ import annotations
@@ -95,7 +90,7 @@ from common.readings import Readings
 from common.robots import footprint_reach
 from common.scenario import LidarSpec, RobotProfile
 
-LAYOUTS = ("nav7", "lidar43", "lidar43_log", "lidar79_motion", "lidar49_robot", "lidar103_robot")
+LAYOUTS = ("nav7", "lidar43", "lidar43_log", "lidar79_motion", "lidar49_robot")
 RANGE_RATE_SCALE = 3.0  # m/s
 _TWO_PI = 2.0 * math.pi
 # Neighbouring returns further apart than this in range are two surfaces (an edge), not one to
@@ -194,8 +189,8 @@ def make_layout(
 
     elif name == "lidar79_motion":
         return _motion_layout(robot, lidar, goal_distance_scale)
-    elif name in ROBOT_LAYOUT_SECTORS:
-        return _robot_layout(name, robot, lidar, goal_distance_scale)
+    elif name == "lidar49_robot":
+        return _robot_layout(robot, lidar, goal_distance_scale)
     elif name in ("lidar43", "lidar43_log"):
         floor = min(robot.bounding_radius, 0.5 * lidar.range_max)
         log_scale = 1.0 / math.log(lidar.range_max / floor) if name == "lidar43_log" else 0.0
@@ -206,19 +201,16 @@ def make_layout(
 
 
 def _sector_layout(name: str, robot: RobotProfile, lidar: LidarSpec, goal_distance_scale: float, inv_range: float,
-                   floor: float, log_scale: float, shift: np.ndarray | None = None,
-                   sectors: int = LIDAR43_BEAMS) -> ObservationLayout:
+                   floor: float, log_scale: float, shift: np.ndarray | None = None) -> ObservationLayout:
     """The 43 entries of ``lidar43`` (goal, motion and 36 sectors; :func:`_encode` says how the
-    sectors read), each beam's range plus ``shift`` where given (the robot layouts' clearance);
-    with other ``sectors``, that many sectors in place of 36."""
-    size = sectors + 7
-    low = np.concatenate([[-1, -1, -1, -1, -1, -1], np.zeros(sectors + 1)]).astype(np.float32)
-    high = np.ones(size, dtype=np.float32)
-    bounds = sector_bounds(lidar.beams, sectors)
+    sectors read), each beam's range plus ``shift`` where given (``lidar49_robot``'s clearance)."""
+    low = np.concatenate([[-1, -1, -1, -1, -1, -1], np.zeros(LIDAR43_BEAMS + 1)]).astype(np.float32)
+    high = np.ones(43, dtype=np.float32)
+    bounds = sector_bounds(lidar.beams, LIDAR43_BEAMS)
     inv_v, inv_w = 1.0 / robot.v_max, 1.0 / robot.w_max
 
     def compute(readings: Readings, goal: tuple[float, float]) -> np.ndarray:
-        out = np.empty(size, dtype=np.float32)
+        out = np.empty(43, dtype=np.float32)
         odometry = readings.odometry
         ranges = readings.lidar if shift is None else readings.lidar + shift
         x, y, yaw = odometry.pose
@@ -289,7 +281,6 @@ def _range_rates(out, first, ranges, expected, bounds, elapsed, scale) -> None:
 
 
 ROBOT_SCALES = (0.5, 1.0, 1.0, 2.0, 3.0, 1.0)  # lidar49_robot's divisors of the robot's entries
-ROBOT_LAYOUT_SECTORS = {"lidar49_robot": LIDAR43_BEAMS, "lidar103_robot": 90}  # the robot layouts' sectors
 CLEARANCE_FLOOR = 0.05  # m: lidar49_robot's d0
 
 
@@ -300,25 +291,24 @@ def robot_entries(robot: RobotProfile) -> np.ndarray:
     return np.clip(np.array(values) / ROBOT_SCALES, 0.0, 1.0).astype(np.float32)
 
 
-def _robot_layout(name: str, robot: RobotProfile, lidar: LidarSpec, goal_distance_scale: float) -> ObservationLayout:
-    """``lidar49_robot`` and ``lidar103_robot``: goal and motion as ``lidar43_log``, the sectors'
-    clearance from the footprint, and the robot's own entries (see the module)."""
+def _robot_layout(robot: RobotProfile, lidar: LidarSpec, goal_distance_scale: float) -> ObservationLayout:
+    """``lidar49_robot``: goal and motion as ``lidar43_log``, the sectors' clearance from the
+    footprint, and the robot's own entries (see the module)."""
     # _encode's log scale reads log(max(r, floor) / floor): given clearance + d0 and floor d0, that is log(c / d0 + 1).
-    sectors = _sector_layout(name, robot, lidar, goal_distance_scale, 0.0, CLEARANCE_FLOOR,
+    sectors = _sector_layout("lidar49_robot", robot, lidar, goal_distance_scale, 0.0, CLEARANCE_FLOOR,
                              1.0 / math.log(lidar.range_max / CLEARANCE_FLOOR + 1.0),
-                             shift=CLEARANCE_FLOOR - footprint_reach(robot, lidar), sectors=ROBOT_LAYOUT_SECTORS[name])
-    scan_size = sectors.space.shape[0]
+                             shift=CLEARANCE_FLOOR - footprint_reach(robot, lidar))
     low = np.concatenate([sectors.space.low, np.zeros(len(ROBOT_SCALES), dtype=np.float32)])
     high = np.ones(len(low), dtype=np.float32)
     own = robot_entries(robot)
 
     def compute(readings: Readings, goal: tuple[float, float]) -> np.ndarray:
         out = np.empty(len(low), dtype=np.float32)
-        out[:scan_size] = sectors(readings, goal)
-        out[scan_size:] = own
+        out[:43] = sectors(readings, goal)
+        out[43:] = own
         return out
 
-    return ObservationLayout(name, spaces.Box(low, high, dtype=np.float32), compute)
+    return ObservationLayout("lidar49_robot", spaces.Box(low, high, dtype=np.float32), compute)
 
 
 def _motion_layout(robot: RobotProfile, lidar: LidarSpec, goal_distance_scale: float) -> ObservationLayout:

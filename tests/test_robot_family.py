@@ -165,33 +165,3 @@ def test_the_clearance_term_prices_closeness_from_the_footprint():
 
     least = float((unwrapped._readings.lidar - footprint_reach(unwrapped.scenario.robot, unwrapped.scenario.lidar)).min())
     assert info["reward_terms"]["clearance"] == pytest.approx(-(10.0 - least))
-
-
-def test_lidar103_robot_sees_a_gap_that_lidar49_robot_s_wider_sectors_hide():
-    """A 1 m ring round the robot with an 8° opening ahead (beams at 0.5°–7.5° read nothing): 36
-    sectors of 10° each take a wall beam into the opening's sector, 90 of 4° show the opening."""
-    from common.kinematics import Pose2D
-    from common.readings import Imu, Odometry, Readings
-
-    robot, lidar = RobotProfile(), LidarSpec(beams=360)
-    ranges = np.full(360, 1.0)
-    ranges[180:188] = lidar.range_max
-    pose = Pose2D(1.0, 2.0, 0.3)
-    readings = Readings(pose=pose, velocity=(0.2, 0.1), odometry=Odometry(pose, 0.2, 0.1), lidar=ranges,
-                        imu=Imu((0.0, 0.0, 0.0), (0.0, 0.0, 0.05)), collided=False, time=0.0)
-    coarse = make_layout("lidar49_robot", robot, lidar)(readings, (5.0, 0.0))
-    fine_layout = make_layout("lidar103_robot", robot, lidar)
-    fine = fine_layout(readings, (5.0, 0.0))
-    assert fine.shape == fine_layout.space.shape == (103,) and fine_layout.space.contains(fine)
-    wall = coarse[6]
-    assert np.all(coarse[6:42] == wall)  # the opening is lost in its 10° sector
-    # The opening's two 4° sectors read the clearance of a miss: range_max less the robot's radius.
-    import math
-
-    miss = math.log((lidar.range_max - robot.radius) / 0.05 + 1.0) / math.log(lidar.range_max / 0.05 + 1.0)
-    assert fine[6 + 45] == fine[6 + 46] == pytest.approx(miss, abs=1e-6) and miss > wall + 0.3
-    assert np.all(np.delete(fine[6:96], [45, 46]) == wall)
-    # Goal, motion and the robot's own entries are lidar49_robot's, in the same places round the sectors.
-    np.testing.assert_array_equal(fine[:6], coarse[:6])
-    assert fine[96] == coarse[42]
-    np.testing.assert_array_equal(fine[97:], coarse[43:])
