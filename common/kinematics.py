@@ -125,7 +125,7 @@ class WheelOdometry:
         later metre off course.
         """
         if self.noise > 0.0:
-            slip = self.rng.normal(0.0, self.noise, 2)
+            slip = self.rng.normal(0.0, self.noise, 2).tolist()  # floats: NumPy scalars slow the arithmetic after
             left *= 1.0 + slip[0]
             right *= 1.0 + slip[1]
         self.v, self.w = body_velocity(left, right, self.wheel_radius, self.wheel_base)

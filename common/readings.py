@@ -86,14 +86,36 @@ class Readings(NamedTuple):
 def sensed_ranges(ranges: np.ndarray, spec: LidarSpec, rng: np.random.Generator) -> np.ndarray:
     """What a lidar of ``spec`` makes of exact ranges (at most ``range_max``, a miss reading
     ``range_max``), in place, alike in every tier: Gaussian noise on the returns only (a beam that
-    hit nothing keeps reading range_max, as IR-SIM's does), then the range limits."""
+    hit nothing keeps reading range_max, as IR-SIM's does), one draw per return in beam order,
+    then the range limits."""
     if spec.noise_std > 0.0:
-        returns = ranges < spec.range_max
-        ranges[returns] += rng.normal(0.0, spec.noise_std, int(returns.sum()))
-        np.minimum(ranges, spec.range_max, out=ranges)
-    if spec.noise_std > 0.0 or spec.range_min > 0.0:
-        np.maximum(ranges, spec.range_min, out=ranges)  # a floor, or noise that may dip below 0
+        noise = rng.normal(0.0, spec.noise_std, _returns(ranges, spec.range_max))
+        _add_to_returns(ranges, noise, spec.range_max, spec.range_min)
+    elif spec.range_min > 0.0:
+        np.maximum(ranges, spec.range_min, out=ranges)
     return ranges
+
+
+@kernel
+def _returns(ranges: np.ndarray, range_max: float) -> int:
+    """How many beams returned (read less than ``range_max``)."""
+    count = 0
+    for value in ranges:
+        count += value < range_max
+    return count
+
+
+@kernel
+def _add_to_returns(ranges: np.ndarray, noise: np.ndarray, range_max: float, range_min: float) -> None:
+    """Add ``noise`` to the returns in beam order, then keep every range within [range_min,
+    range_max] (noise may push a return past either). One call: NumPy's mask, scatter and two
+    clips took a fiftieth of the 3D env's step."""
+    k = 0
+    for i in range(ranges.shape[0]):
+        if ranges[i] < range_max:
+            ranges[i] += noise[k]
+            k += 1
+        ranges[i] = max(min(ranges[i], range_max), range_min)
 
 
 def frozen(array: np.ndarray) -> np.ndarray:

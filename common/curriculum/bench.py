@@ -308,27 +308,18 @@ def physics3d_bench_scenario() -> Scenario:
     return next(SUITES["warehouse"].scenarios(count=1, template=TEMPLATE))
 
 
-def physics3d_steps_per_s(scenario: Scenario, steps: int = 2_000, seed: int = 0) -> tuple[float, list[int]]:
+def physics3d_steps_per_s(scenario: Scenario, steps: int = 2_000, seed: int = 0) -> float:
     """Steps per second of ``gymnasium.make("physics3d/WarehouseNav-v0")`` (lidar43, headless, default
-    control period) under random actions, resetting whenever an episode ends; and the steps after
-    which it reset (the bare loop replays them)."""
+    control period) under random actions, resetting whenever an episode ends."""
     import gymnasium as gym
 
     import physics3d  # noqa: F401  (registers the env)
 
     env = gym.make("physics3d/WarehouseNav-v0", world=scenario, observation="lidar43")
     actions = np.random.default_rng(seed).uniform(-1.0, 1.0, (steps, 2)).astype(np.float32)
-    resets = []
-    env.reset(seed=seed)
-    start = cpu_seconds()
-    for k, action in enumerate(actions):
-        _, _, terminated, truncated, _ = env.step(action)
-        if terminated or truncated:
-            env.reset()
-            resets.append(k)
-    elapsed = cpu_seconds() - start
+    elapsed = _timed_random_drive(env, actions, seed)
     env.close()
-    return steps / elapsed, resets
+    return steps / elapsed
 
 
 def gui_figures(steps: int = 300, seed: int = 0) -> dict[str, float]:
@@ -358,46 +349,56 @@ def gui_figures(steps: int = 300, seed: int = 0) -> dict[str, float]:
     return {"gui_real_time_steps_per_s": real_time, **figures}
 
 
-def bare_pybullet_steps_per_s(scenario: Scenario, steps: int = 2_000, seed: int = 0, resets: Sequence[int] = ()) -> float:
-    """The same physics with no env around it: per step, the wheel targets of the same random
-    actions, the world's sub-steps and one ``rayTestBatch`` of the lidar's beams; the robot is put
-    back at the start after the steps in ``resets``, so both loops drive the same episodes."""
+def physics3d_and_bare(scenario: Scenario, steps: int, chunk: int = 100, seed: int = 0) -> tuple[float, float]:
+    """The 3D env's steps per second (``physics3d_steps_per_s``'s loop) and a bare PyBullet
+    loop's on the same episodes, the two taking turns ``chunk`` steps at a time, each timed by CPU:
+    in separate runs of a few seconds one side strayed by a quarter on this noisy machine; taking
+    turns, a slow minute falls on both alike.
+
+    The bare loop is the same physics with no env around it: per step, the wheel targets of the
+    same random actions, the world's sub-steps and one ``rayTestBatch`` of the lidar's beams; the
+    robot is put back at the start after the steps where the env reset, so both drive the same
+    episodes."""
+    import gymnasium as gym
     import pybullet as p
 
+    import physics3d  # noqa: F401  (registers the env)
     from common.kinematics import wheel_speeds
     from physics3d.robot import MOTOR_FORCE, WHEEL_BASE, WHEEL_RADIUS, yaw_of
     from physics3d.world import World
 
+    env = gym.make("physics3d/WarehouseNav-v0", world=scenario, observation="lidar43")
     world = World(scenario, seed=seed)
     client, robot, substeps, rays = world.client, world.robot, world.substeps, world.lidar.rays
-    mapping = ActionMapping(scenario.robot)
     actions = np.random.default_rng(seed).uniform(-1.0, 1.0, (steps, 2)).astype(np.float32)
+    mapping = ActionMapping(scenario.robot)
     targets = [wheel_speeds(*mapping.to_velocity(action), WHEEL_RADIUS, WHEEL_BASE) for action in actions]
-    restart = set(resets)
-    start = cpu_seconds()
-    for k, target in enumerate(targets):
-        p.setJointMotorControlArray(robot.id, robot.wheels, p.VELOCITY_CONTROL, targetVelocities=target,
-                                    forces=(MOTOR_FORCE, MOTOR_FORCE), physicsClientId=client)
-        for _ in range(substeps):
-            p.stepSimulation(physicsClientId=client)
-        (x, y, z), orientation = p.getBasePositionAndOrientation(robot.id, physicsClientId=client)
-        p.rayTestBatch(*rays(x, y, z, yaw_of(orientation)), physicsClientId=client)
-        if k in restart:
-            world.reset()
-    elapsed = cpu_seconds() - start
+    env.reset(seed=seed)
+    spent_env = spent_bare = 0.0
+    for first in range(0, steps, chunk):
+        turn = range(first, min(steps, first + chunk))
+        resets = set()
+        start = cpu_seconds()
+        for k in turn:
+            _, _, terminated, truncated, _ = env.step(actions[k])
+            if terminated or truncated:
+                env.reset()
+                resets.add(k)
+        spent_env += cpu_seconds() - start
+        start = cpu_seconds()
+        for k in turn:
+            p.setJointMotorControlArray(robot.id, robot.wheels, p.VELOCITY_CONTROL, targetVelocities=targets[k],
+                                        forces=(MOTOR_FORCE, MOTOR_FORCE), physicsClientId=client)
+            for _ in range(substeps):
+                p.stepSimulation(physicsClientId=client)
+            (x, y, z), orientation = p.getBasePositionAndOrientation(robot.id, physicsClientId=client)
+            p.rayTestBatch(*rays(x, y, z, yaw_of(orientation)), physicsClientId=client)
+            if k in resets:
+                world.reset()
+        spent_bare += cpu_seconds() - start
+    env.close()
     world.close()
-    return steps / elapsed
-
-
-def physics3d_and_bare(scenario: Scenario, steps: int, runs: int = 3) -> tuple[float, float]:
-    """The 3D env's steps per second and the bare loop's on the same episodes, each the faster of
-    ``runs`` alternated runs: one run each strayed by a quarter on this noisy machine."""
-    env, bare = [], []
-    for _ in range(runs):
-        figure, resets = physics3d_steps_per_s(scenario, steps)
-        env.append(figure)
-        bare.append(bare_pybullet_steps_per_s(scenario, steps, resets=resets))
-    return max(env), max(bare)
+    return steps / spent_env, steps / spent_bare
 
 
 def camera_fps(scenario: Scenario, frames: int = 100) -> float:
@@ -499,8 +500,8 @@ def movers3d_figures(steps: int) -> dict[str, Any]:
 
     moving = moving_bench_scenario(people=10, template=TEMPLATE)
     still = frozen(moving)
-    fastest = fastest_alternated({"moving": lambda: physics3d_steps_per_s(moving, steps)[0],
-                                  "frozen": lambda: physics3d_steps_per_s(still, steps)[0]}, runs=3)
+    fastest = fastest_alternated({"moving": lambda: physics3d_steps_per_s(moving, steps),
+                                  "frozen": lambda: physics3d_steps_per_s(still, steps)}, runs=3)
     flat, static = fastest["moving"], fastest["frozen"]
     return {"physics3d_movers_steps_per_s": round(flat, 1), "physics3d_movers_frozen_steps_per_s": round(static, 1),
             "physics3d_movers_vs_static": round(flat / static, 3)}
@@ -570,7 +571,7 @@ def run_benchmarks(steps: int = 20_000) -> dict[str, Any]:
     flat = flatland_steps_per_s(scenario, steps)
     irsim = irsim_steps_per_s(scenario, steps=max(500, steps // 10))
     scenario3d = physics3d_bench_scenario()
-    steps3d = max(500, steps // 10)
+    steps3d = max(500, steps // 5)
     env3d, bare3d = physics3d_and_bare(scenario3d, steps3d)
     return {
         "world": scenario.name,
