@@ -458,12 +458,23 @@ def test_cli_compare_and_eval_run_in_3d(tmp_path, capsys):
     assert json.loads(capsys.readouterr().out)["episodes"] == 2
 
 
-def test_bench_measures_the_env_the_bare_loop_and_the_camera():
+def test_bench_measures_the_env_the_bare_loop_and_the_camera(monkeypatch):
     bench = physics3d_bench_scenario()
     assert bench.robot == ROBOT_PROFILE and len(bench.obstacles) == 31
     assert physics3d_steps_per_s(bench, steps=100) > 0
-    env_rate, bare_rate = physics3d_and_bare(bench, steps=100, chunk=30)
+    resets: dict[int, int] = {}  # resets of each world: the env's, and the bare loop's
+    reset = World.reset
+
+    def counted(self, *args, **kwargs):
+        resets[id(self)] = resets.get(id(self), 0) + 1
+        return reset(self, *args, **kwargs)
+
+    monkeypatch.setattr(World, "reset", counted)
+    env_rate, bare_rate = physics3d_and_bare(bench, steps=300, chunk=30)
     assert env_rate > 0 and bare_rate > 0
+    # The bare loop replays every reset the env made after its first, so both drive the same episodes.
+    bare, env = sorted(resets.values())
+    assert bare >= 2 and env == bare + 1
     assert camera_fps(bench, frames=3) > 0
 
 

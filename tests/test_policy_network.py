@@ -17,6 +17,15 @@ ACTIONS = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
 BATCH = torch.as_tensor(np.random.default_rng(0).uniform(-1.0, 1.0, (8, 43)), dtype=torch.float32)
 
 
+@pytest.fixture(autouse=True)
+def _argument_checks_off():
+    """As the runner trains: torch's distribution argument checks off, so the policy's own Gaussian runs."""
+    checks = torch.distributions.Distribution._validate_args
+    torch.distributions.Distribution.set_default_validate_args(False)
+    yield
+    torch.distributions.Distribution.set_default_validate_args(checks)
+
+
 def _policy(space=OBSERVATIONS, **kwargs) -> NavActorCriticPolicy:
     torch.manual_seed(0)
     return NavActorCriticPolicy(space, ACTIONS, lambda _: 3e-4, **kwargs)
@@ -57,6 +66,7 @@ def _assert_as_stable_baselines3(policy: NavActorCriticPolicy, observations=BATC
 def test_direct_layer_calls_give_stable_baselines3_s_own_numbers_and_gradients(kwargs):
     policy = _policy(**kwargs)
     assert policy._plain_layers() is not None, "the plain MLP must take the direct path, or this test compares nothing"
+    assert policy._plain_gaussian() == (not kwargs.get("use_sde", False))  # gSDE's distribution is SB3's own
     _assert_as_stable_baselines3(policy)
     latent = policy.mlp_extractor.forward_actor(BaseModel.extract_features(policy, BATCH, policy.pi_features_extractor))
     assert torch.equal(policy.actor_latent(BATCH), latent)
@@ -127,3 +137,14 @@ def test_training_with_the_runner_s_settings_gives_the_same_weights_to_the_bit(a
     initial, fast = trained(True)
     assert not torch.equal(initial, fast)  # it trained
     assert torch.equal(fast, trained(False)[1])
+
+
+def test_with_torch_s_argument_checks_on_a_nan_mean_is_refused_as_stable_baselines3_refuses_it():
+    policy = _policy(bounded_mean=True)
+    with torch.no_grad():
+        policy.action_net.bias.fill_(float("nan"))
+    actions, _, _ = policy.forward(BATCH)  # checks off, as the runner trains: the envs refuse a NaN action
+    assert torch.isnan(actions).all()
+    torch.distributions.Distribution.set_default_validate_args(True)  # the fixture restores torch's setting
+    with pytest.raises(ValueError, match="loc"):
+        policy.forward(BATCH)

@@ -350,10 +350,10 @@ def gui_figures(steps: int = 300, seed: int = 0) -> dict[str, float]:
 
 
 def physics3d_and_bare(scenario: Scenario, steps: int, chunk: int = 100, seed: int = 0) -> tuple[float, float]:
-    """The 3D env's steps per second (``physics3d_steps_per_s``'s loop) and a bare PyBullet
-    loop's on the same episodes, the two taking turns ``chunk`` steps at a time, each timed by CPU:
-    in separate runs of a few seconds one side strayed by a quarter on this noisy machine; taking
-    turns, a slow minute falls on both alike.
+    """The 3D env's steps per second under random actions (as :func:`physics3d_steps_per_s`) and
+    a bare PyBullet loop's on the same episodes, the two taking turns ``chunk`` steps at a time,
+    each timed by CPU: in separate runs of a few seconds one side strayed by a quarter on this
+    noisy machine; taking turns, a slow minute falls on both alike.
 
     The bare loop is the same physics with no env around it: per step, the wheel targets of the
     same random actions, the world's sub-steps and one ``rayTestBatch`` of the lidar's beams; the
@@ -367,26 +367,21 @@ def physics3d_and_bare(scenario: Scenario, steps: int, chunk: int = 100, seed: i
     from physics3d.robot import MOTOR_FORCE, WHEEL_BASE, WHEEL_RADIUS, yaw_of
     from physics3d.world import World
 
-    env = gym.make("physics3d/WarehouseNav-v0", world=scenario, observation="lidar43")
-    world = World(scenario, seed=seed)
-    client, robot, substeps, rays = world.client, world.robot, world.substeps, world.lidar.rays
     actions = np.random.default_rng(seed).uniform(-1.0, 1.0, (steps, 2)).astype(np.float32)
     mapping = ActionMapping(scenario.robot)
     targets = [wheel_speeds(*mapping.to_velocity(action), WHEEL_RADIUS, WHEEL_BASE) for action in actions]
-    env.reset(seed=seed)
-    spent_env = spent_bare = 0.0
-    for first in range(0, steps, chunk):
-        turn = range(first, min(steps, first + chunk))
-        resets = set()
-        start = cpu_seconds()
-        for k in turn:
+    turns = [range(first, min(steps, first + chunk)) for first in range(0, steps, chunk)]
+    resets: set[int] = set()  # the steps after which the env reset, for the bare loop to replay
+
+    def env_turn() -> None:
+        for k in turns[0]:
             _, _, terminated, truncated, _ = env.step(actions[k])
             if terminated or truncated:
                 env.reset()
                 resets.add(k)
-        spent_env += cpu_seconds() - start
-        start = cpu_seconds()
-        for k in turn:
+
+    def bare_turn() -> None:
+        for k in turns.pop(0):
             p.setJointMotorControlArray(robot.id, robot.wheels, p.VELOCITY_CONTROL, targetVelocities=targets[k],
                                         forces=(MOTOR_FORCE, MOTOR_FORCE), physicsClientId=client)
             for _ in range(substeps):
@@ -395,9 +390,18 @@ def physics3d_and_bare(scenario: Scenario, steps: int, chunk: int = 100, seed: i
             p.rayTestBatch(*rays(x, y, z, yaw_of(orientation)), physicsClientId=client)
             if k in resets:
                 world.reset()
-        spent_bare += cpu_seconds() - start
-    env.close()
-    world.close()
+
+    env = gym.make("physics3d/WarehouseNav-v0", world=scenario, observation="lidar43")
+    world = None
+    try:
+        world = World(scenario, seed=seed)
+        client, robot, substeps, rays = world.client, world.robot, world.substeps, world.lidar.rays
+        env.reset(seed=seed)
+        spent_env, spent_bare = _cpu_seconds_taking_turns([env_turn, bare_turn], len(turns))
+    finally:  # two PyBullet clients are open at once: neither outlives a failure
+        env.close()
+        if world is not None:
+            world.close()
     return steps / spent_env, steps / spent_bare
 
 

@@ -61,8 +61,9 @@ class NavActorCriticPolicy(ActorCriticPolicy):
     are called, which changes the time and not a bit of the result.
     """
 
-    #: Whether the plain MLP's layers may be called directly (:meth:`_plain_layers`; False: always through
-    #: stable-baselines3's module calls; the numbers are the same either way).
+    #: Whether the plain MLP's layers may be called directly and its Gaussian worked out without
+    #: torch's ``Normal`` (:meth:`_plain_layers`, :meth:`_plain_gaussian`; False: always through
+    #: stable-baselines3's module calls and distribution; the numbers are the same either way).
     direct_layer_calls = True
 
     def __init__(self, *args, bounded_mean: bool = False, **kwargs) -> None:
@@ -145,8 +146,10 @@ class NavActorCriticPolicy(ActorCriticPolicy):
         """Whether the actions are stable-baselines3's diagonal Gaussian (not gSDE, not another
         distribution): then :func:`_gaussian_log_prob` and :func:`_gaussian_entropy` give its
         numbers to the bit without building torch's ``Normal`` around them, which with SB3's
-        bookkeeping took about 40% of a rollout step's forward pass for a batch of eight."""
-        return type(self.action_dist) is DiagGaussianDistribution
+        bookkeeping took about 40% of a rollout step's forward pass for a batch of eight. Not while
+        torch checks distributions' arguments (its default; the runner turns the checks off): then
+        ``Normal`` is built, so a NaN mean or a zero deviation is refused as stable-baselines3 would."""
+        return type(self.action_dist) is DiagGaussianDistribution and not torch.distributions.Distribution._validate_args
 
     def _gaussian(self, latent_pi: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """The Gaussian's mean and standard deviation, as DiagGaussianDistribution makes them (the
