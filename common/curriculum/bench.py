@@ -11,7 +11,7 @@ import os
 import tempfile
 import time
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 import yaml
@@ -48,24 +48,36 @@ def flatland_steps_per_s(world: Scenario | str | Path, steps: int = 20_000, seed
     import flatland  # noqa: F401  (registers the env)
 
     env = gym.make("flatland/Nav-v0", world=world if isinstance(world, Scenario) else str(world), observation="lidar43")
-    actions = np.random.default_rng(seed).uniform(-1.0, 1.0, (steps, 2)).astype(np.float32)
+    actions = _random_actions(steps, seed)
     env.reset(seed=seed)
-    for action in actions[:200]:  # warm-up: numba kernels compiled or loaded from cache
-        if any(env.step(action)[2:4]):
-            env.reset()
+    _drive(env, actions, range(min(200, steps)))  # warm-up: numba kernels compiled or loaded from cache
     elapsed = _timed_random_drive(env, actions, seed)
     env.close()
     return steps / elapsed
+
+
+def _random_actions(steps: int, seed: int) -> np.ndarray:
+    """The benchmarks' random drive: ``steps`` actions uniform in [-1, 1]², float32 as a policy's."""
+    return np.random.default_rng(seed).uniform(-1.0, 1.0, (steps, 2)).astype(np.float32)
+
+
+def _drive(env, actions: np.ndarray, steps: Iterable[int]) -> set[int]:
+    """Step ``env`` through ``actions[k]`` for each k of ``steps``, resetting as episodes end; the
+    steps after which it reset."""
+    resets = set()
+    for k in steps:
+        _, _, terminated, truncated, _ = env.step(actions[k])
+        if terminated or truncated:
+            env.reset()
+            resets.add(k)
+    return resets
 
 
 def _timed_random_drive(env, actions: np.ndarray, seed: int, clock: Callable[[], float] = cpu_seconds) -> float:
     """Seconds (of ``clock``) to step ``env`` through ``actions`` from ``reset(seed)``, resetting as episodes end."""
     env.reset(seed=seed)
     start = clock()
-    for action in actions:
-        _, _, terminated, truncated, _ = env.step(action)
-        if terminated or truncated:
-            env.reset()
+    _drive(env, actions, range(len(actions)))
     return clock() - start
 
 
@@ -316,8 +328,7 @@ def physics3d_steps_per_s(scenario: Scenario, steps: int = 2_000, seed: int = 0)
     import physics3d  # noqa: F401  (registers the env)
 
     env = gym.make("physics3d/WarehouseNav-v0", world=scenario, observation="lidar43")
-    actions = np.random.default_rng(seed).uniform(-1.0, 1.0, (steps, 2)).astype(np.float32)
-    elapsed = _timed_random_drive(env, actions, seed)
+    elapsed = _timed_random_drive(env, _random_actions(steps, seed), seed)
     env.close()
     return steps / elapsed
 
@@ -337,7 +348,7 @@ def gui_figures(steps: int = 300, seed: int = 0) -> dict[str, float]:
 
     figures: dict[str, float] = {}
     worlds = (("gui", physics3d_bench_scenario()), ("gui_movers", moving_bench_scenario(people=10, template=TEMPLATE)))
-    actions = np.random.default_rng(seed).uniform(-1.0, 1.0, (steps, 2)).astype(np.float32)
+    actions = _random_actions(steps, seed)
     with stdout_to_stderr():
         for name, world in worlds:  # one GUI window a process: one env at a time
             env = gym.make("physics3d/WarehouseNav-v0", world=world, observation="lidar43", render_mode="human")
@@ -367,18 +378,15 @@ def physics3d_and_bare(scenario: Scenario, steps: int, chunk: int = 100, seed: i
     from physics3d.robot import MOTOR_FORCE, WHEEL_BASE, WHEEL_RADIUS, yaw_of
     from physics3d.world import World
 
-    actions = np.random.default_rng(seed).uniform(-1.0, 1.0, (steps, 2)).astype(np.float32)
+    actions = _random_actions(steps, seed)
     mapping = ActionMapping(scenario.robot)
     targets = [wheel_speeds(*mapping.to_velocity(action), WHEEL_RADIUS, WHEEL_BASE) for action in actions]
+    # Each round the env drives the first chunk left, then the bare loop replays it and drops it.
     turns = [range(first, min(steps, first + chunk)) for first in range(0, steps, chunk)]
     resets: set[int] = set()  # the steps after which the env reset, for the bare loop to replay
 
     def env_turn() -> None:
-        for k in turns[0]:
-            _, _, terminated, truncated, _ = env.step(actions[k])
-            if terminated or truncated:
-                env.reset()
-                resets.add(k)
+        resets.update(_drive(env, actions, turns[0]))
 
     def bare_turn() -> None:
         for k in turns.pop(0):

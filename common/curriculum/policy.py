@@ -74,15 +74,13 @@ class NavActorCriticPolicy(ActorCriticPolicy):
         self._plain_types = frozenset((nn.Linear, *activation_classes().values()))
 
     def forward(self, obs: torch.Tensor, deterministic: bool = False) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        layers = self._plain_layers()
-        if layers is None:
+        heads = self._direct_heads(obs)
+        if heads is None:
             return super().forward(obs, deterministic)
-        features = _flat(obs)
-        latent_pi, values = _through(layers[0], features), _through(layers[1], features)
+        latent_pi, values = heads
         if self._plain_gaussian():
             mean, std = self._gaussian(latent_pi)
-            # Normal.rsample's draw, without building the distribution around it.
-            actions = mean if deterministic else mean + torch.empty(mean.shape, dtype=mean.dtype, device=mean.device).normal_() * std
+            actions = mean if deterministic else _gaussian_sample(mean, std)
             log_prob = _gaussian_log_prob(actions, mean, std)
         else:
             distribution = self._get_action_dist_from_latent(latent_pi)
@@ -90,17 +88,26 @@ class NavActorCriticPolicy(ActorCriticPolicy):
             log_prob = distribution.log_prob(actions)
         return actions.reshape((-1, *self.action_space.shape)), values, log_prob
 
-    def evaluate_actions(self, obs: torch.Tensor, actions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
-        layers = self._plain_layers()
-        if layers is None:
+    def evaluate_actions(self, obs: torch.Tensor,
+                         actions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        heads = self._direct_heads(obs)
+        if heads is None:
             return super().evaluate_actions(obs, actions)
-        features = _flat(obs)
-        latent_pi, values = _through(layers[0], features), _through(layers[1], features)
+        latent_pi, values = heads
         if self._plain_gaussian():
             mean, std = self._gaussian(latent_pi)
             return values, _gaussian_log_prob(actions, mean, std), _gaussian_entropy(std)
         distribution = self._get_action_dist_from_latent(latent_pi)
         return values, distribution.log_prob(actions), distribution.entropy()
+
+    def _direct_heads(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor] | None:
+        """The actor's latent code and the critic's values, the layers called directly
+        (:meth:`_plain_layers`); None where stable-baselines3's own calls must run."""
+        layers = self._plain_layers()
+        if layers is None:
+            return None
+        features = _flat(obs)
+        return _through(layers[0], features), _through(layers[1], features)
 
     def actor_latent(self, obs: torch.Tensor) -> torch.Tensor:
         """The actor's latent code (what its action reads), as stable-baselines3 computes it."""
@@ -113,8 +120,9 @@ class NavActorCriticPolicy(ActorCriticPolicy):
         """The actor's hidden layers and the critic's (ending in its value head), in order, where
         this is stable-baselines3's plain MLP as it is now: flat Box observations, flattening
         feature extractors, layers of ``nn.Linear`` and the activations a curriculum may name, a
-        linear mean head, and no hook on any of them nor a global one. Then :meth:`forward`, :meth:`evaluate_actions` and :meth:`actor_latent` run the
-        layers' own ``forward`` one after another, to the same bit as stable-baselines3: calling
+        linear mean head, and no hook on any of them nor a global one. Then :meth:`forward`,
+        :meth:`evaluate_actions` and :meth:`actor_latent` run the layers' own ``forward`` one
+        after another, to the same bit as stable-baselines3: calling
         each module through ``nn.Module.__call__`` was 60% of the forward pass of a batch of eight,
         61 µs of 146, once per rollout step and minibatch. None otherwise (a custom extractor, a
         layer swapped in, a hook registered since construction): stable-baselines3's own calls run.
@@ -149,7 +157,8 @@ class NavActorCriticPolicy(ActorCriticPolicy):
         bookkeeping took about 40% of a rollout step's forward pass for a batch of eight. Not while
         torch checks distributions' arguments (its default; the runner turns the checks off): then
         ``Normal`` is built, so a NaN mean or a zero deviation is refused as stable-baselines3 would."""
-        return type(self.action_dist) is DiagGaussianDistribution and not torch.distributions.Distribution._validate_args
+        return (type(self.action_dist) is DiagGaussianDistribution
+                and not torch.distributions.Distribution._validate_args)
 
     def _gaussian(self, latent_pi: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """The Gaussian's mean and standard deviation, as DiagGaussianDistribution makes them (the
@@ -180,7 +189,14 @@ def _flat(obs: torch.Tensor) -> torch.Tensor:
     return obs.float().flatten(1)
 
 
+# torch's Normal's constants, computed as it computes them.
 _LOG_SQRT_2PI = math.log(math.sqrt(2 * math.pi))
+_ENTROPY_CONSTANT = 0.5 + 0.5 * math.log(2 * math.pi)
+
+
+def _gaussian_sample(mean: torch.Tensor, std: torch.Tensor) -> torch.Tensor:
+    """Normal(mean, std).rsample(): the same draw from torch's generator, the same arithmetic."""
+    return mean + torch.empty(mean.shape, dtype=mean.dtype, device=mean.device).normal_() * std
 
 
 def _gaussian_log_prob(actions: torch.Tensor, mean: torch.Tensor, std: torch.Tensor) -> torch.Tensor:
@@ -191,7 +207,7 @@ def _gaussian_log_prob(actions: torch.Tensor, mean: torch.Tensor, std: torch.Ten
 
 def _gaussian_entropy(std: torch.Tensor) -> torch.Tensor:
     """Normal(mean, std).entropy() summed over the action's dimensions, as torch computes it."""
-    return (0.5 + 0.5 * math.log(2 * math.pi) + torch.log(std)).sum(dim=1)
+    return (_ENTROPY_CONSTANT + torch.log(std)).sum(dim=1)
 
 
 def _through(layers: tuple[nn.Module, ...], x: torch.Tensor) -> torch.Tensor:
