@@ -50,8 +50,9 @@ class NavEnv(NavigationEnv):
     render_mode=None, max_steps=500, difficulty=0.5, goal_distance_scale=10.0, template=None,
     action_mapping="linear", resample=False, goal_threshold=None, **conditions)``
 
-    * ``world``: a :class:`Scenario`, a list of them, a kind (``open``, ``sparse``, ``cluttered``,
-      ``warehouse``, ``trap``) or the path of a scenario or IR-SIM world YAML.
+    * ``world``: a :class:`Scenario`, a list of them, a generator kind (``open``, ``sparse``, ``cluttered``,
+      ``warehouse``, ``trap``, ``maze``, ``passages``, ``crowd``, ``warehouse_moving``), a mix of kinds by
+      weight, or the path of a scenario or IR-SIM world YAML.
     * ``render_mode``: ``None``, ``"human"`` (a matplotlib window) or ``"rgb_array"``.
     * ``difficulty``: 0 to 1, for generator kinds; ``template``: the robot, lidar and world size
       the generator uses.

@@ -79,9 +79,9 @@ class WarehouseNavEnv(NavigationEnv):
     reward="default", render_mode=None, max_steps=500, difficulty=0.5, goal_distance_scale=10.0,
     template=None, action_mapping="linear", camera=False, resample=False, goal_threshold=None, **conditions)``
 
-    * ``world``: a :class:`Scenario`, a list of them, a kind (``open``, ``sparse``, ``cluttered``,
-      ``warehouse``, ``trap``), a mix of kinds by weight, or the path of a scenario or IR-SIM
-      world YAML (extruded to 3D).
+    * ``world``: a :class:`Scenario`, a list of them, a generator kind (``open``, ``sparse``, ``cluttered``,
+      ``warehouse``, ``trap``, ``maze``, ``passages``, ``crowd``, ``warehouse_moving``), a mix of kinds by
+      weight, or the path of a scenario or IR-SIM world YAML (extruded to 3D).
     * ``render_mode``: ``None`` (headless), ``"human"`` (the PyBullet GUI with RGB, depth and
       segmentation previews, paced to real time) or ``"rgb_array"`` (a chase camera, 480 x 360).
     * ``difficulty``: 0 to 1, for generator kinds; ``template``: the robot, lidar and world size
