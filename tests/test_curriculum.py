@@ -41,6 +41,7 @@ def _with(change: dict, stage: dict | None = None) -> dict:
     (_with({}, {"n_env": 3}), "stages.0.n_env", "unknown key (did you mean 'n_envs'?); allowed: action_mapping, algorithm, budget"),
     (_with({"device": "tpu"}), "device", "'auto', 'cpu', 'cuda' or 'mps'"),
     (_with({}, {"algorithm": "dqn"}), "stages.0.algorithm", "'ppo', 'sac' or 'td3'"),
+    (_with({}, {"optimizer_kernels": "together"}), "stages.0.optimizer_kernels", "'foreach' or 'fused'"),
     (_with({}, {"budget": -5}), "stages.0.budget", "greater than or equal to 1"),
     (_with({}, {"hyperparams": {"learning_rte": 0.1}}), "stages.0.hyperparams.learning_rte", "not a PPO argument; allowed:"),
     (_with({}, {"hyperparams": {"policy_kwargs": {"net_arc": [64]}}}), "stages.0.hyperparams.policy_kwargs.net_arc",

@@ -10,7 +10,7 @@ from stable_baselines3 import PPO, SAC
 from stable_baselines3.common.policies import ActorCriticPolicy, BaseModel
 
 import flatland  # noqa: F401  (registers the env)
-from common.curriculum.policy import NavActorCriticPolicy, optimizers_step_together
+from common.curriculum.policy import NavActorCriticPolicy, use_optimizer_kernels
 
 OBSERVATIONS = gym.spaces.Box(-1.0, 1.0, (43,), np.float32)
 ACTIONS = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
@@ -126,10 +126,8 @@ def test_training_with_the_runner_s_settings_gives_the_same_weights_to_the_bit(a
             model = SAC("MlpPolicy", env, learning_starts=64, batch_size=32, seed=0, device="cpu",
                         policy_kwargs={"net_arch": [32, 32]})
         if runner_settings:
-            optimizers_step_together(model)
-            optimizers = [model.policy.optimizer] if algorithm is PPO else [model.actor.optimizer, model.critic.optimizer,
-                                                                         model.ent_coef_optimizer]
-            assert all(group["foreach"] for optimizer in optimizers for group in optimizer.param_groups)
+            use_optimizer_kernels(model)
+            assert all(group["foreach"] for optimizer in _optimizers(model) for group in optimizer.param_groups)
         initial = _weights(model)
         model.learn(512)
         return initial, _weights(model)
@@ -137,6 +135,35 @@ def test_training_with_the_runner_s_settings_gives_the_same_weights_to_the_bit(a
     initial, fast = trained(True)
     assert not torch.equal(initial, fast)  # it trained
     assert torch.equal(fast, trained(False)[1])
+
+
+def _optimizers(model) -> list[torch.optim.Optimizer]:
+    return [model.policy.optimizer] if isinstance(model, PPO) else [model.actor.optimizer, model.critic.optimizer,
+                                                                   model.ent_coef_optimizer]
+
+
+@pytest.mark.parametrize("algorithm", [PPO, SAC])
+def test_fused_kernels_do_every_optimiser_s_updates(algorithm, monkeypatch):
+    import torch.optim.adam as adam
+
+    fused_calls = []
+    monkeypatch.setattr(adam, "_fused_adam", lambda *args, _fused=adam._fused_adam, **kwargs: (
+        fused_calls.append(1), _fused(*args, **kwargs))[1])
+    env = gym.make("flatland/Nav-v0", world="sparse", observation="lidar43_log")
+    model = (PPO("MlpPolicy", env, n_steps=64, batch_size=32, n_epochs=1, seed=0, device="cpu") if algorithm is PPO
+             else SAC("MlpPolicy", env, learning_starts=32, batch_size=16, seed=0, device="cpu",
+                      policy_kwargs={"net_arch": [16, 16]}))
+    use_optimizer_kernels(model, "fused")
+    initial = _weights(model)
+    model.learn(64)
+    assert not torch.equal(initial, _weights(model))
+    updates = 2 if algorithm is PPO else 3 * 32  # PPO: 64 steps in batches of 32; SAC: 3 optimisers a step after 32
+    assert len(fused_calls) == updates
+    use_optimizer_kernels(model, None)  # torch's own choice again: its loop on CPU
+    model.learn(64, reset_num_timesteps=False)
+    assert len(fused_calls) == updates
+    with pytest.raises(ValueError, match="allowed: foreach, fused or None"):
+        use_optimizer_kernels(model, "together")
 
 
 def test_with_torch_s_argument_checks_on_a_nan_mean_is_refused_as_stable_baselines3_refuses_it():

@@ -54,16 +54,18 @@ def test_a_resumed_second_stage_writes_its_own_stage_index_and_seed(tmp_path):
         assert (manifest["stage"], manifest["stage_index"], manifest["seed"]) == ("sparse", 1, SEED + 1), name
 
 
-def test_a_resumed_stage_steps_its_optimisers_together_after_loading_their_saved_state(tmp_path, monkeypatch):
+def test_a_resumed_stage_sets_its_optimiser_kernels_after_loading_their_saved_state(tmp_path, monkeypatch):
     # Loading an optimiser's state brings back its saved settings: the runner's faster ones must be
     # set again afterwards (the numbers are the same either way, so only the order can show it).
     from common.curriculum import runner as runner_module
 
     config, out, calls = _config(), tmp_path / "run", []
-    for name in ("load_weights", "optimizers_step_together"):
+    config = config.model_copy(update={"stages": [config.stages[0], config.stages[1].model_copy(
+        update={"optimizer_kernels": "fused"})]})
+    for name in ("load_weights", "use_optimizer_kernels"):
         original = getattr(runner_module, name)
         monkeypatch.setattr(runner_module, name, lambda *args, _name=name, _original=original, **kwargs: (
-            calls.append(_name), _original(*args, **kwargs))[1])
+            calls.append((_name, *args[1:])), _original(*args, **kwargs))[1])
 
     def interrupt(row: dict) -> None:
         if row["stage"] == "sparse":
@@ -73,4 +75,5 @@ def test_a_resumed_stage_steps_its_optimisers_together_after_loading_their_saved
         Runner(config, out, progress=False, on_evaluation=interrupt).run()
     calls.clear()
     Runner(config, out, resume=True, progress=False).run()
-    assert calls == ["load_weights", "optimizers_step_together"]
+    assert [call[0] for call in calls] == ["load_weights", "use_optimizer_kernels"]
+    assert calls[1][1:] == ("fused",)  # the resumed stage's own setting

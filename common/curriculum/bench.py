@@ -205,11 +205,11 @@ def _train_as(model, stock: bool) -> None:
     arithmetic either way."""
     import torch
 
-    from common.curriculum.policy import optimizers_step_together
+    from common.curriculum.policy import use_optimizer_kernels
 
     torch.distributions.Distribution.set_default_validate_args(stock)
     model.policy.direct_layer_calls = not stock
-    optimizers_step_together(model, together=not stock)
+    use_optimizer_kernels(model, None if stock else "foreach")
 
 
 def ppo_steps_per_s(kind: str, steps: int = 16_384, seed: int = 0, vec_env: str = "dummy") -> float:

@@ -50,6 +50,8 @@ def _noise(value: Any, action_dim: int, source, field: str) -> Any:
 
 
 ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu", "gelu", "silu")
+# How the optimisers update their tensors on CPU (common.curriculum.policy.use_optimizer_kernels).
+OPTIMIZER_KERNELS = ("foreach", "fused")
 Layers = Annotated[list[Annotated[int, Field(ge=1, le=4096)]], Field(max_length=16)]
 
 

@@ -25,6 +25,7 @@ from torch.nn.modules.module import (_global_backward_hooks, _global_backward_pr
                                      _global_forward_pre_hooks)
 
 from common.actions import ACTION_SPACE
+from common.curriculum.hyperparams import OPTIMIZER_KERNELS
 from common.curriculum.policy_file import MANIFEST, Manifest, PolicyFile
 from common.errors import ConfigError, quote
 from common.files import size_text
@@ -480,19 +481,27 @@ def _optimizer_state_fits(optimizer) -> bool:
     return True
 
 
-def optimizers_step_together(model, together: bool = True) -> None:
-    """Make a CPU model's optimisers update all their tensors with one call per operation
-    (torch's ``foreach`` kernels, the default only on CUDA): the same arithmetic, the same weights
-    to the bit, and Adam's step 22% faster on PPO's two 64 × 64 networks (389 µs against 496).
-    Call it again after loading optimiser states, which bring back the saved settings.
-    ``together=False`` hands the choice back to torch (its default)."""
+def use_optimizer_kernels(model, kernels: str | None = "foreach") -> None:
+    """Choose how a model's optimisers update their tensors (a stage's ``optimizer_kernels``).
+
+    On CPU (elsewhere torch's own choice stands): ``foreach`` (the runner's default) makes one
+    call per operation for all of a network's tensors (torch's default only on CUDA), the same
+    arithmetic as torch's per-tensor loop, so the same weights as stable-baselines3 trains to the
+    bit, and Adam's step 22% faster on PPO's two 64 × 64 networks (389 µs against 496).
+    ``fused``: one kernel per tensor does Adam's whole update, faster again (docs/training.md) but
+    rounded differently, so the weights part from stable-baselines3's in their last bits. None
+    hands the choice back to torch. Call it again after loading optimiser states, which bring
+    back the saved settings."""
+    if kernels not in (*OPTIMIZER_KERNELS, None):
+        raise ValueError(f"optimizer kernels {kernels!r}; allowed: {', '.join(OPTIMIZER_KERNELS)} or None")
     if model.device.type != "cpu":
         return
     for name in model._get_torch_save_params()[0]:
         optimizer = _attribute(model, name)
         if isinstance(optimizer, torch.optim.Optimizer):
             for group in optimizer.param_groups:
-                group["foreach"] = True if together else None
+                group["foreach"] = True if kernels == "foreach" else None
+                group["fused"] = True if kernels == "fused" else None
 
 
 def _attribute(model, dotted: str):

@@ -25,7 +25,7 @@ from common.atomic import atomic_write
 from common.conditions import conditions_of
 from common.curriculum.comparison import write_csv
 from common.curriculum.hyperparams import resolve_hyperparams
-from common.curriculum.policy import (DeterministicAction, algorithm_class, load_weights, optimizers_step_together,
+from common.curriculum.policy import (DeterministicAction, algorithm_class, load_weights, use_optimizer_kernels,
                                       policy_class, vec_env_class)
 from common.curriculum.policy_file import Normalizer, update_manifest
 from common.curriculum.replay import load_replay
@@ -254,7 +254,7 @@ class Runner:
             if isinstance(states, list) and len(states) == venv.num_envs:
                 for env_index, env_state in enumerate(states):
                     venv.env_method("restore_rng", env_state, indices=[env_index])
-        optimizers_step_together(model)
+        use_optimizer_kernels(model, stage.optimizer_kernels)
         already = int(model.num_timesteps)
         self.eval_log.truncate(stage.name, already)
         if resuming:

@@ -16,6 +16,7 @@ stages:
     hyperparams: {learning_rate: 3.0e-4, n_steps: 256}   # stable-baselines3's own argument names
     n_envs: 8
     vec_env: dummy       # dummy | subproc
+    optimizer_kernels: foreach   # foreach (SB3's weights to the bit) | fused (faster on CPU, rounded differently)
     normalize: false     # VecNormalize on observations
     budget: 500000       # environment steps
     eval: {suite: sparse, episodes: 100, every: 50000}
@@ -35,7 +36,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from common.actions import MAPPINGS
 from common.conditions import CONDITION_KEYS, ONLY_2D, ONLY_3D, Conditions, conditions_of
-from common.curriculum.hyperparams import policy_kwargs_from_yaml, resolve_hyperparams
+from common.curriculum.hyperparams import OPTIMIZER_KERNELS, policy_kwargs_from_yaml, resolve_hyperparams
 from common.curriculum.policy_file import ALGORITHMS
 from common.drive import refuse_other_drives
 from common.errors import ConfigError, quote
@@ -116,6 +117,7 @@ class StageSpec(_Strict):
     hyperparams: dict[str, Any] = {}
     n_envs: Annotated[int, Field(ge=1, le=256)] = 8
     vec_env: Literal["dummy", "subproc"] = "dummy"
+    optimizer_kernels: Literal[OPTIMIZER_KERNELS] = "foreach"  # type: ignore[valid-type]
     normalize: bool = False
     budget: Annotated[int, Field(ge=1)]
     eval: EvalSpec
