@@ -152,6 +152,11 @@ def _gap(x: float, y: float, half_x: float, half_y: float, bx: float, by: float,
     return math.hypot(max(abs(x - bx) - half_x - bhalf_x, 0.0), max(abs(y - by) - half_y - bhalf_y, 0.0))
 
 
+# The ends keep more than OFF_PATHS off the paths (a crate at least its reach): the next float up
+# makes _off_paths's "at least" that "more than", exactly as the ends were always drawn.
+_BEYOND_OFF_PATHS = math.nextafter(OFF_PATHS, math.inf)
+
+
 @kernel(inline="always")
 def _off_paths(x: float, y: float, reach: float, aisles: np.ndarray, walk_x: float) -> bool:
     """Whether (x, y) is at least ``reach`` off every aisle's centre line and the cross-aisle's."""
@@ -196,8 +201,8 @@ def _ends(rng, inner: np.ndarray, boxes: np.ndarray, aisles: np.ndarray, walk_x:
             ends[e, 1] = inner[1] + (inner[3] - inner[1]) * rng.random()
         if math.hypot(ends[1, 0] - ends[0, 0], ends[1, 1] - ends[0, 1]) < min_distance:
             continue
-        if (_off_paths(ends[0, 0], ends[0, 1], OFF_PATHS, aisles, walk_x)
-                and _off_paths(ends[1, 0], ends[1, 1], OFF_PATHS, aisles, walk_x)
+        if (_off_paths(ends[0, 0], ends[0, 1], _BEYOND_OFF_PATHS, aisles, walk_x)
+                and _off_paths(ends[1, 0], ends[1, 1], _BEYOND_OFF_PATHS, aisles, walk_x)
                 and _clear_of_boxes(ends[0, 0], ends[0, 1], 0.0, boxes, clearance)
                 and _clear_of_boxes(ends[1, 0], ends[1, 1], 0.0, boxes, clearance)):
             return ends

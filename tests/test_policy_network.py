@@ -6,7 +6,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
-from stable_baselines3 import PPO, SAC
+from stable_baselines3 import PPO, SAC, TD3
 from stable_baselines3.common.policies import ActorCriticPolicy, BaseModel
 
 import flatland  # noqa: F401  (registers the env)
@@ -138,30 +138,37 @@ def test_training_with_the_runner_s_settings_gives_the_same_weights_to_the_bit(a
 
 
 def _optimizers(model) -> list[torch.optim.Optimizer]:
-    return [model.policy.optimizer] if isinstance(model, PPO) else [model.actor.optimizer, model.critic.optimizer,
-                                                                   model.ent_coef_optimizer]
+    if isinstance(model, PPO):
+        return [model.policy.optimizer]
+    return [model.actor.optimizer, model.critic.optimizer] + ([model.ent_coef_optimizer] if isinstance(model, SAC) else [])
 
 
-@pytest.mark.parametrize("algorithm", [PPO, SAC])
+@pytest.mark.parametrize("algorithm", [PPO, SAC, TD3])
 def test_fused_kernels_do_every_optimiser_s_updates(algorithm, monkeypatch):
     import torch.optim.adam as adam
 
-    fused_calls = []
-    monkeypatch.setattr(adam, "_fused_adam", lambda *args, _fused=adam._fused_adam, **kwargs: (
-        fused_calls.append(1), _fused(*args, **kwargs))[1])
+    fused_calls: list[int] = []  # the id of the first tensor each fused update was given
+    monkeypatch.setattr(adam, "_fused_adam", lambda params, *args, _fused=adam._fused_adam, **kwargs: (
+        fused_calls.append(id(params[0])), _fused(params, *args, **kwargs))[1])
     env = gym.make("flatland/Nav-v0", world="sparse", observation="lidar43_log")
     model = (PPO("MlpPolicy", env, n_steps=64, batch_size=32, n_epochs=1, seed=0, device="cpu") if algorithm is PPO
-             else SAC("MlpPolicy", env, learning_starts=32, batch_size=16, seed=0, device="cpu",
-                      policy_kwargs={"net_arch": [16, 16]}))
+             else algorithm("MlpPolicy", env, learning_starts=32, batch_size=16, seed=0, device="cpu",
+                            policy_kwargs={"net_arch": [16, 16]}))
+    steps: dict[int, int] = {}
+    for optimizer in _optimizers(model):
+        optimizer.register_step_post_hook(lambda opt, args, kwargs: steps.update({id(opt): steps.get(id(opt), 0) + 1}))
     use_optimizer_kernels(model, "fused")
-    initial = _weights(model)
     model.learn(64)
-    assert not torch.equal(initial, _weights(model))
-    updates = 2 if algorithm is PPO else 3 * 32  # PPO: 64 steps in batches of 32; SAC: 3 optimisers a step after 32
-    assert len(fused_calls) == updates
+    assert len(steps) == len(_optimizers(model))  # every optimiser stepped
+    assert len(fused_calls) == sum(steps.values())  # and each step was a fused one
+    firsts = {id(group["params"][0]) for optimizer in _optimizers(model) for group in optimizer.param_groups}
+    assert set(fused_calls) == firsts
     use_optimizer_kernels(model, None)  # torch's own choice again: its loop on CPU
+    assert all(group["foreach"] is None and group["fused"] is None
+               for optimizer in _optimizers(model) for group in optimizer.param_groups)
+    fused, stepped = len(fused_calls), sum(steps.values())
     model.learn(64, reset_num_timesteps=False)
-    assert len(fused_calls) == updates
+    assert sum(steps.values()) > stepped and len(fused_calls) == fused
     with pytest.raises(ValueError, match="allowed: foreach, fused or None"):
         use_optimizer_kernels(model, "together")
 

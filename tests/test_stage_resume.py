@@ -55,8 +55,8 @@ def test_a_resumed_second_stage_writes_its_own_stage_index_and_seed(tmp_path):
 
 
 def test_a_resumed_stage_sets_its_optimiser_kernels_after_loading_their_saved_state(tmp_path, monkeypatch):
-    # Loading an optimiser's state brings back its saved settings: the runner's faster ones must be
-    # set again afterwards (the numbers are the same either way, so only the order can show it).
+    # Loading an optimiser's state brings back its saved settings: the stage's own must be set
+    # again afterwards (here the saved ones are the stage's already, so only the order shows it).
     from common.curriculum import runner as runner_module
 
     config, out, calls = _config(), tmp_path / "run", []
@@ -65,7 +65,7 @@ def test_a_resumed_stage_sets_its_optimiser_kernels_after_loading_their_saved_st
     for name in ("load_weights", "use_optimizer_kernels"):
         original = getattr(runner_module, name)
         monkeypatch.setattr(runner_module, name, lambda *args, _name=name, _original=original, **kwargs: (
-            calls.append((_name, *args[1:])), _original(*args, **kwargs))[1])
+            calls.append((_name, *args[1:], *kwargs.values())), _original(*args, **kwargs))[1])
 
     def interrupt(row: dict) -> None:
         if row["stage"] == "sparse":

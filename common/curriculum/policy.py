@@ -488,14 +488,15 @@ def use_optimizer_kernels(model, kernels: str | None = "foreach") -> None:
     call per operation for all of a network's tensors (torch's default only on CUDA), the same
     arithmetic as torch's per-tensor loop, so the same weights as stable-baselines3 trains to the
     bit, and Adam's step 22% faster on PPO's two 64 × 64 networks (389 µs against 496).
-    ``fused``: one kernel per tensor does Adam's whole update, faster again (docs/training.md) but
+    ``fused``: each tensor's whole Adam update in one pass, faster again (docs/training.md) but
     rounded differently, so the weights part from stable-baselines3's in their last bits. None
     hands the choice back to torch. Call it again after loading optimiser states, which bring
-    back the saved settings."""
+    back the saved settings (a model saved after ``fused`` training keeps it when loaded by
+    stable-baselines3 alone)."""
     if kernels not in (*OPTIMIZER_KERNELS, None):
         raise ValueError(f"optimizer kernels {kernels!r}; allowed: {', '.join(OPTIMIZER_KERNELS)} or None")
     if model.device.type != "cpu":
-        return
+        kernels = None  # also undoes a CPU run's setting that a loaded state brought back
     for name in model._get_torch_save_params()[0]:
         optimizer = _attribute(model, name)
         if isinstance(optimizer, torch.optim.Optimizer):
