@@ -177,16 +177,6 @@ def _clear_of_boxes(x: float, y: float, half: float, boxes: np.ndarray, gap: flo
     return True
 
 
-@kernel(inline="always")
-def _clear_of_crates(x: float, y: float, half: float, crates: np.ndarray, gap: float) -> bool:
-    """Whether a square of half side ``half`` at (x, y) keeps ``gap`` from every crate (x, y, side)."""
-    for k in range(crates.shape[0]):
-        other = 0.5 * crates[k, 2]
-        if _gap(x, y, half, half, crates[k, 0], crates[k, 1], other, other) < gap:
-            return False
-    return True
-
-
 @kernel
 def _ends(rng, inner: np.ndarray, boxes: np.ndarray, aisles: np.ndarray, walk_x: float, min_distance: float,
           clearance: float) -> np.ndarray:
@@ -212,9 +202,10 @@ def _ends(rng, inner: np.ndarray, boxes: np.ndarray, aisles: np.ndarray, walk_x:
 @kernel
 def _crates(rng, inner: np.ndarray, count: int, boxes: np.ndarray, aisles: np.ndarray, walk_x: float,
             ends: np.ndarray, gap: float) -> np.ndarray:
-    """Up to ``count`` square crates (x, y, side) off the aisles' centre lines and the cross-aisle
-    (x = ``walk_x``), ``CLEAR_OF_ROBOT`` from the start and goal, ``gap`` from every box and crate."""
-    crates = np.zeros((count, 3))
+    """Up to ``count`` square crates as boxes are given (x, y, half side, half side), off the aisles'
+    centre lines and the cross-aisle (x = ``walk_x``), ``CLEAR_OF_ROBOT`` from the start and goal,
+    ``gap`` from every box and crate."""
+    crates = np.zeros((count, 4))
     placed = 0
     for _ in range(20 * count):
         if placed == count:
@@ -223,14 +214,14 @@ def _crates(rng, inner: np.ndarray, count: int, boxes: np.ndarray, aisles: np.nd
         y = inner[1] + (inner[3] - inner[1]) * rng.random()
         side = 0.4 + 0.3 * rng.random()
         half = 0.5 * side
-        reach = half * math.sqrt(2.0) + 0.7
-        if (not _off_paths(x, y, reach, aisles, walk_x)
-                or math.hypot(x - ends[0, 0], y - ends[0, 1]) - half * math.sqrt(2.0) < CLEAR_OF_ROBOT
-                or math.hypot(x - ends[1, 0], y - ends[1, 1]) - half * math.sqrt(2.0) < CLEAR_OF_ROBOT
+        corner = half * math.sqrt(2.0)  # from the centre
+        if (not _off_paths(x, y, corner + 0.7, aisles, walk_x)
+                or math.hypot(x - ends[0, 0], y - ends[0, 1]) - corner < CLEAR_OF_ROBOT
+                or math.hypot(x - ends[1, 0], y - ends[1, 1]) - corner < CLEAR_OF_ROBOT
                 or not _clear_of_boxes(x, y, half, boxes, gap)
-                or not _clear_of_crates(x, y, half, crates[:placed], gap)):
+                or not _clear_of_boxes(x, y, half, crates[:placed], gap)):
             continue
-        crates[placed, 0], crates[placed, 1], crates[placed, 2] = x, y, side
+        crates[placed, 0], crates[placed, 1], crates[placed, 2], crates[placed, 3] = x, y, half, half
         placed += 1
     return crates[:placed]
 
@@ -262,7 +253,7 @@ def warehouse_moving(template: Scenario, rng: np.random.Generator, difficulty: f
                      2.0 * template.robot.bounding_radius + 0.05)
     frame = _Frame(world, flip)
     statics = [frame.box(x, y, 2 * hx, 2 * hy, h) for x, y, hx, hy, h in boxes]
-    statics += [frame.box(x, y, side, side, 0.6) for x, y, side in crates]
+    statics += [frame.box(x, y, 2 * hx, 2 * hy, 0.6) for x, y, hx, hy in crates]
     movers: list[Obstacle] = []
     unaware = max(0.0, 2.0 * difficulty - 1.0)  # the share of drivers and people blind to the robot, as in crowds
     for k in rng.permutation(len(aisles))[:1 + int(round(2 * difficulty))]:
