@@ -265,11 +265,14 @@ def mean_action(policy) -> Callable[[torch.Tensor], torch.Tensor] | None:
 
 
 def vec_env_class(name: str):
-    """The stable-baselines3 VecEnv class of a stage's ``vec_env``: ``dummy`` (the envs in this
-    process) or ``subproc`` (a process per env)."""
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+    """The VecEnv class of a stage's ``vec_env``: ``dummy`` (the envs in this process,
+    :class:`~common.curriculum.vec_envs.FreshInfoVecEnv`) or ``subproc`` (stable-baselines3's
+    SubprocVecEnv, a process per env)."""
+    from stable_baselines3.common.vec_env import SubprocVecEnv
 
-    return {"dummy": DummyVecEnv, "subproc": SubprocVecEnv}[name]
+    from common.curriculum.vec_envs import FreshInfoVecEnv
+
+    return {"dummy": FreshInfoVecEnv, "subproc": SubprocVecEnv}[name]
 
 
 def observation_space(manifest: Manifest):

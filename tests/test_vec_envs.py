@@ -1,0 +1,80 @@
+"""The stage's in-process VecEnv: DummyVecEnv's steps, without its deep copy of the infos."""
+
+import copy
+
+import numpy as np
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from common.curriculum.policy import vec_env_class
+from common.curriculum.vec_envs import FreshInfoVecEnv
+from flatland.env import NavEnv
+
+# Short episodes, so the 300 steps below cross several ends: timeouts, collisions and arrivals.
+ENV_KWARGS = {"world": "cluttered", "observation": "lidar43_log", "max_steps": 40}
+
+
+def _venv(cls):
+    return make_vec_env(NavEnv, n_envs=4, seed=3, env_kwargs=ENV_KWARGS, vec_env_cls=cls)
+
+
+def test_a_dummy_stage_trains_in_the_fresh_info_env():
+    assert vec_env_class("dummy") is FreshInfoVecEnv
+
+
+def test_it_steps_as_dummy_vec_env_does_and_keeps_what_it_returned():
+    ours, stock = _venv(FreshInfoVecEnv), _venv(DummyVecEnv)
+    actions = np.random.default_rng(0).uniform(-1, 1, size=(300, 4, 2)).astype(np.float32)
+    assert np.array_equal(ours.reset(), stock.reset())
+    kept = []
+    ends = {"terminal_observation": 0, "TimeLimit.truncated": 0}
+    for action in actions:
+        obs, rewards, dones, infos = ours.step(action)
+        stock_obs, stock_rewards, stock_dones, stock_infos = stock.step(action)
+        assert np.array_equal(obs, stock_obs) and np.array_equal(rewards, stock_rewards)
+        assert np.array_equal(dones, stock_dones)
+        for info, stock_info in zip(infos, stock_infos):
+            assert info.keys() == stock_info.keys()
+            for key, value in info.items():
+                if isinstance(value, np.ndarray):
+                    assert np.array_equal(value, stock_info[key])
+                elif key == "episode":  # Monitor's summary: the same return and length, its own clock
+                    assert (value["r"], value["l"]) == (stock_info[key]["r"], stock_info[key]["l"])
+                else:
+                    assert value == stock_info[key], key
+            ends["terminal_observation"] += "terminal_observation" in info
+            ends["TimeLimit.truncated"] += info["TimeLimit.truncated"]
+        kept.append((infos, copy.deepcopy(infos), obs.copy()))
+    assert ends["terminal_observation"] > ends["TimeLimit.truncated"] > 0  # timeouts and other ends both met
+    # What a step returned is not changed by the steps after it (the buffers are refilled, not the infos).
+    for infos, as_returned, obs in kept:
+        assert [info.keys() for info in infos] == [info.keys() for info in as_returned]
+        for info, original in zip(infos, as_returned):
+            if "terminal_observation" in info:
+                assert np.array_equal(info["terminal_observation"], original["terminal_observation"])
+            assert info["reward_terms"] == original["reward_terms"]
+    ours.close()
+    stock.close()
+
+
+def test_a_terminal_observation_is_a_copy_of_the_env_s():
+    venv = _venv(FreshInfoVecEnv)
+    venv.reset()
+    returned = []
+    for env in venv.envs:
+        step = env.step
+
+        def recording_step(action, step=step):
+            result = step(action)
+            returned.append(result[0])
+            return result
+
+        env.step = recording_step
+    for _ in range(60):
+        infos = venv.step(np.ones((4, 2), dtype=np.float32))[3]
+        for info in infos:
+            if "terminal_observation" in info:
+                assert all(info["terminal_observation"] is not obs for obs in returned)
+                assert any(np.array_equal(info["terminal_observation"], obs) for obs in returned[-4:])
+                return
+    raise AssertionError("no episode ended in 60 steps")
