@@ -50,9 +50,9 @@ def test_it_steps_as_dummy_vec_env_does_and_keeps_what_it_returned():
     for infos, as_returned, obs in kept:
         assert [info.keys() for info in infos] == [info.keys() for info in as_returned]
         for info, original in zip(infos, as_returned):
-            if "terminal_observation" in info:
-                assert np.array_equal(info["terminal_observation"], original["terminal_observation"])
-            assert info["reward_terms"] == original["reward_terms"]
+            for key, value in info.items():
+                same = np.array_equal(value, original[key]) if isinstance(value, np.ndarray) else value == original[key]
+                assert same, key
     ours.close()
     stock.close()
 
@@ -78,3 +78,19 @@ def test_a_terminal_observation_is_a_copy_of_the_env_s():
                 assert any(np.array_equal(info["terminal_observation"], obs) for obs in returned[-4:])
                 return
     raise AssertionError("no episode ended in 60 steps")
+
+
+def test_a_camera_env_s_terminal_observation_is_a_dict_as_dummy_vec_env_s():
+    from physics3d.env import WarehouseNavEnv
+
+    kwargs = {"world": "open", "camera": True, "max_steps": 2}
+    ours, stock = (make_vec_env(WarehouseNavEnv, n_envs=1, seed=0, env_kwargs=kwargs, vec_env_cls=cls)
+                   for cls in (FreshInfoVecEnv, DummyVecEnv))
+    ours.reset(), stock.reset()
+    for _ in range(2):
+        infos, stock_infos = ours.step(np.zeros((1, 2), np.float32))[3], stock.step(np.zeros((1, 2), np.float32))[3]
+    terminal, stock_terminal = infos[0]["terminal_observation"], stock_infos[0]["terminal_observation"]
+    assert isinstance(terminal, dict) and terminal.keys() == stock_terminal.keys() == {"state", "rgb", "depth"}
+    assert all(np.array_equal(terminal[key], stock_terminal[key]) for key in terminal)
+    ours.close()
+    stock.close()
