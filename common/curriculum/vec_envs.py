@@ -24,9 +24,9 @@ class FreshInfoVecEnv(DummyVecEnv):
         for index, env in enumerate(self.envs):
             obs, self.buf_rews[index], terminated, truncated, info = env.step(self.actions[index])
             self.buf_infos[index] = info
-            self.buf_dones[index] = terminated or truncated
+            self.buf_dones[index] = done = terminated or truncated
             info["TimeLimit.truncated"] = truncated and not terminated  # stable-baselines3's key for a timeout
-            if self.buf_dones[index]:
+            if done:
                 info["terminal_observation"] = copy.deepcopy(obs)  # an array, or a dict of them (camera)
                 obs, self.reset_infos[index] = env.reset()
             self._save_obs(index, obs)
