@@ -4,6 +4,7 @@ from pathlib import Path
 
 import pytest
 
+from common.conditions import conditions_of
 from common.curriculum.policy import load_policy
 from common.curriculum.policy_file import read_manifest
 from common.evaluation import evaluate
@@ -39,11 +40,13 @@ def test_a_transfer_policy_carries_its_evidence(name):
     assert set(evidence["steps_to_90"]) == {"transfer", "scratch"}
 
 
-def _arrivals_within_a_tenth_of_a_metre(name: str, suite: str) -> float:
-    """Success of a shipped policy on ten held-out episodes of ``suite``, judged within 0.1 m."""
+def _arrivals_within_a_tenth_of_a_metre(name: str, suite: str, tier: str = "flatland", count: int = 10) -> float:
+    """Success of a shipped policy on ``count`` held-out episodes of ``suite``, judged within 0.1 m
+    and driven as it was trained (its lidar, noise and actuation: the conditions it names)."""
     agent = load_policy(POLICIES / f"{name}.zip")
-    tight = [s.model_copy(update={"goal_threshold": 0.1}) for s in get_suite(suite).scenarios(count=10, seed=100_000)]
-    (summary,) = evaluate([agent], tight, seed=100_000)
+    worlds = list(get_suite(suite).scenarios(count=count, seed=100_000))
+    (summary,) = evaluate([agent], worlds, tier=tier, conditions=conditions_of(agent.env_kwargs), goal_radius=0.1,
+                          seed=100_000)
     return summary.success_rate
 
 
@@ -67,10 +70,4 @@ def test_a_shipped_clutter_policy_arrives_within_a_tenth_of_a_metre_among_clutte
 def test_a_shipped_moving_policy_still_arrives_among_movers(name, tier, suite, count):
     # Their test figures: 98.0% of 200 crowds in flatland, 94.5% of 200 moving warehouses in
     # PyBullet; judged as trained (within 0.1 m, their lidar of 180 beams and actuation delay).
-    from common.conditions import conditions_of
-
-    agent = load_policy(POLICIES / f"{name}.zip")
-    worlds = list(get_suite(suite).scenarios(count=count, seed=100_000))
-    (summary,) = evaluate([agent], worlds, tier=tier, conditions=conditions_of(agent.env_kwargs), goal_radius=0.1,
-                          seed=100_000)
-    assert summary.success_rate >= 0.8
+    assert _arrivals_within_a_tenth_of_a_metre(name, suite, tier, count) >= 0.8
