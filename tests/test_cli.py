@@ -216,6 +216,24 @@ def test_bench_times_its_own_work_not_the_time_other_work_held_the_core(monkeypa
     assert rate > 200
 
 
+def test_drives_taking_turns_make_every_step_once_in_order_one_turn_each_in_turn():
+    from common.curriculum import bench
+
+    log = []
+
+    def drive(name):
+        def steps(indices):
+            sum(range(20_000))  # some CPU time to measure
+            log.append((name, list(indices)))
+        return steps
+
+    rates = bench.steps_per_s_taking_turns([drive("env"), drive("reference")], [10, 3], rounds=3)
+    assert [name for name, _ in log] == ["env", "reference"] * 3
+    assert [k for name, turn in log if name == "env" for k in turn] == list(range(10))
+    assert [k for name, turn in log if name == "reference" for k in turn] == list(range(3))
+    assert all(rate > 0 for rate in rates)
+
+
 def test_bench_gui_without_a_display_says_how_to_run_it(monkeypatch, capsys):
     monkeypatch.delenv("DISPLAY", raising=False)
     assert main(["bench", "--gui"]) == 2

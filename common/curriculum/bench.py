@@ -11,7 +11,7 @@ import os
 import tempfile
 import time
 from pathlib import Path
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any, Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 import yaml
@@ -43,17 +43,29 @@ def flatland_steps_per_s(world: Scenario | str | Path, steps: int = 20_000, seed
     """Steps per second of ``gymnasium.make("flatland/Nav-v0", world=world)`` (lidar43) under random
     actions, resetting whenever an episode ends (random driving crashes often, so resets are part of
     it; with a generator kind as ``world`` every reset draws a new scenario)."""
+    with _flatland_drive(world, steps, seed) as drive:
+        start = cpu_seconds()
+        drive(range(steps))
+        return steps / (cpu_seconds() - start)
+
+
+@contextlib.contextmanager
+def _flatland_drive(world: Scenario | str | Path, steps: int, seed: int = 0) -> Iterator[Callable[[range], Any]]:
+    """The flatland env of :func:`flatland_steps_per_s` warmed up and reset with ``seed``: a
+    function that drives it through steps k of the ``steps`` random actions, resetting as episodes end."""
     import gymnasium as gym
 
     import flatland  # noqa: F401  (registers the env)
 
     env = gym.make("flatland/Nav-v0", world=world if isinstance(world, Scenario) else str(world), observation="lidar43")
-    actions = _random_actions(steps, seed)
-    env.reset(seed=seed)
-    _drive(env, actions, range(min(200, steps)))  # warm-up: numba kernels compiled or loaded from cache
-    elapsed = _timed_random_drive(env, actions, seed)
-    env.close()
-    return steps / elapsed
+    try:
+        actions = _random_actions(steps, seed)
+        env.reset(seed=seed)
+        _drive(env, actions, range(min(200, steps)))  # warm-up: numba kernels compiled or loaded from cache
+        env.reset(seed=seed)
+        yield lambda indices: _drive(env, actions, indices)
+    finally:
+        env.close()
 
 
 def _random_actions(steps: int, seed: int) -> np.ndarray:
@@ -81,14 +93,17 @@ def _timed_random_drive(env, actions: np.ndarray, seed: int, clock: Callable[[],
     return clock() - start
 
 
-def irsim_steps_per_s(world: Scenario | Path, robot: RobotProfile | None = None, steps: int = 2_000,
-                      seed: int = 0) -> float | None:
-    """IR-SIM's steps per second on the same world (a scenario, exported, or an IR-SIM world file;
-    headless, same lidar), under the random actions flatland gets mapped to the same velocities,
-    reset on collision or arrival as the env does; None without IR-SIM."""
+@contextlib.contextmanager
+def _irsim_drive(world: Scenario | Path, robot: RobotProfile | None, steps: int,
+                 seed: int = 0) -> Iterator[Callable[[range], Any] | None]:
+    """IR-SIM headless on the same world (a scenario, exported, or an IR-SIM world file; the same
+    lidar), warmed up and reset: a function that drives it through steps k of ``steps`` random
+    actions mapped to the velocities flatland's env gets, resetting on collision or arrival as
+    the env does; None without IR-SIM."""
     irsim = import_irsim()
     if irsim is None:
-        return None
+        yield None
+        return
     from common.irsim_export import scenario_to_irsim
 
     mapping = ActionMapping(robot or world.robot)  # the env's default mapping: the same commands flatland gets
@@ -100,18 +115,44 @@ def irsim_steps_per_s(world: Scenario | Path, robot: RobotProfile | None = None,
             path = Path(tmp) / "bench_world.yaml"
             path.write_text(yaml.safe_dump(scenario_to_irsim(world), sort_keys=False))
         env = irsim.make(str(path), headless=True, log_level="ERROR", seed=seed)
-        for command in commands[:50]:
-            env.step(command.reshape(2, 1))
-        env.reset()
-        start = cpu_seconds()
-        for command in commands:
-            env.step(command.reshape(2, 1))
-            env.get_lidar_scan()
-            if env.robot.collision_flag or env.robot.arrive_flag:
-                env.reset()
-        elapsed = cpu_seconds() - start
-        env.end(0)
-    return steps / elapsed
+        try:
+            for command in commands[:50]:
+                env.step(command.reshape(2, 1))
+            env.reset()
+
+            def drive(indices: range) -> None:
+                for k in indices:
+                    env.step(commands[k].reshape(2, 1))
+                    env.get_lidar_scan()
+                    if env.robot.collision_flag or env.robot.arrive_flag:
+                        env.reset()
+
+            yield drive
+        finally:
+            env.end(0)
+
+
+def steps_per_s_taking_turns(drives: Sequence[Callable[[range], Any]], steps: Sequence[int],
+                             rounds: int) -> list[float]:
+    """Steps per second (CPU time) of each of ``drives`` through its ``steps`` steps, split into
+    ``rounds`` turns taken one after another. Measured as separate runs of a few seconds, one side
+    of a ratio strayed by a third on this noisy machine (`movers_vs_static` read 0.70 once, 0.42 to
+    0.49 otherwise, 2026-11-27); taking turns, a slow minute falls on every side alike."""
+    turns = [iter([range(n * r // rounds, n * (r + 1) // rounds) for r in range(rounds)]) for n in steps]
+    spent = _cpu_seconds_taking_turns([lambda drive=drive, pending=pending: drive(next(pending))
+                                       for drive, pending in zip(drives, turns)], rounds)
+    return [n / seconds for n, seconds in zip(steps, spent)]
+
+
+def flatland_and_irsim_steps_per_s(world: Scenario | Path, steps: int, irsim_steps: int,
+                                   robot: RobotProfile | None = None, rounds: int = 20) -> tuple[float, float | None]:
+    """Flatland's steps per second on ``world`` (as :func:`flatland_steps_per_s`) and IR-SIM's on
+    the same world (``robot``: its robot, for a world file), the two taking turns; IR-SIM's None
+    without it."""
+    with _flatland_drive(world, steps) as flatland, _irsim_drive(world, robot, irsim_steps) as irsim:
+        drives = [(flatland, steps)] + ([] if irsim is None else [(irsim, irsim_steps)])
+        rates = steps_per_s_taking_turns(*zip(*drives), rounds)
+    return rates[0], (rates[1] if irsim is not None else None)
 
 
 CIRCLE_WORLD = {
@@ -151,19 +192,14 @@ def irsim_circle_world_figures(steps: int) -> dict[str, Any]:
 
 
 def _irsim_file_figures(key: str, data: dict, steps: int) -> dict[str, Any]:
-    """Flatland's and IR-SIM's steps per second on the IR-SIM world file ``data`` (each the fastest
-    of three alternated runs: IR-SIM's 2,000 steps swung by half beside other work), and their ratio."""
+    """Flatland's and IR-SIM's steps per second on the IR-SIM world file ``data``, the two taking
+    turns (:func:`flatland_and_irsim_steps_per_s`), and their ratio."""
     from common.world_file import WorldFile
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / f"{key}.yaml"
         path.write_text(yaml.safe_dump(data))
-        robot = WorldFile(path).initial.robot
-        measures = {"flatland": lambda: flatland_steps_per_s(path, steps)}
-        if import_irsim() is not None:
-            measures["irsim"] = lambda: irsim_steps_per_s(path, robot=robot, steps=max(500, steps // 10))
-        fastest = fastest_alternated(measures, runs=3)
-    flat, theirs = fastest["flatland"], fastest.get("irsim")
+        flat, theirs = flatland_and_irsim_steps_per_s(path, steps, max(500, steps // 10), WorldFile(path).initial.robot)
     return {f"{key}_flatland_steps_per_s": round(flat, 1),
             f"{key}_irsim_steps_per_s": None if theirs is None else round(theirs, 1),
             f"{key}_flatland_vs_irsim": None if theirs is None else round(flat / theirs, 1)}
@@ -491,14 +527,15 @@ def fastest_alternated(measures: dict[str, Callable[[], Any]], runs: int) -> dic
 
 
 def movers_figures(steps: int) -> dict[str, Any]:
-    """The env among 20 walking people against the same world frozen (each setting's fastest of
-    three alternated runs), and IR-SIM's own steps on the same moving world."""
+    """The env among 20 walking people against the same world frozen, and IR-SIM's own steps on
+    the same moving world, the three taking turns (:func:`steps_per_s_taking_turns`)."""
     moving = moving_bench_scenario()
-    still = frozen(moving)
-    fastest = fastest_alternated({"moving": lambda: flatland_steps_per_s(moving, steps),
-                                  "frozen": lambda: flatland_steps_per_s(still, steps)}, runs=3)
-    flat, static = fastest["moving"], fastest["frozen"]
-    theirs = irsim_steps_per_s(moving, steps=max(300, steps // 40))
+    irsim_steps = max(300, steps // 40)
+    with _flatland_drive(moving, steps) as among_movers, _flatland_drive(frozen(moving), steps) as among_statues, \
+            _irsim_drive(moving, None, irsim_steps) as irsim:
+        drives = [(among_movers, steps), (among_statues, steps)] + ([] if irsim is None else [(irsim, irsim_steps)])
+        rates = steps_per_s_taking_turns(*zip(*drives), rounds=25)
+    flat, static, theirs = rates[0], rates[1], (rates[2] if irsim is not None else None)
     return {"movers_env_steps_per_s": round(flat, 1), "movers_frozen_env_steps_per_s": round(static, 1),
             "movers_vs_static": round(flat / static, 3),
             "movers_irsim_steps_per_s": None if theirs is None else round(theirs, 1),
@@ -580,8 +617,7 @@ def onnx_figures(calls: int = 20_000, policies: Sequence[str] = ("stage1_2d_ppo"
 def run_benchmarks(steps: int = 20_000) -> dict[str, Any]:
     """All figures of this milestone, as one flat mapping."""
     scenario = bench_scenario()
-    flat = flatland_steps_per_s(scenario, steps)
-    irsim = irsim_steps_per_s(scenario, steps=max(500, steps // 10))
+    flat, irsim = flatland_and_irsim_steps_per_s(scenario, steps, max(500, steps // 10))
     scenario3d = physics3d_bench_scenario()
     steps3d = max(500, steps // 5)
     env3d, bare3d = physics3d_and_bare(scenario3d, steps3d)
