@@ -7,6 +7,7 @@ later milestones extend (planner timings, the 3D tier).
 from __future__ import annotations
 
 import contextlib
+import importlib
 import os
 import tempfile
 import time
@@ -43,21 +44,33 @@ def flatland_steps_per_s(world: Scenario | str | Path, steps: int = 20_000, seed
     """Steps per second of ``gymnasium.make("flatland/Nav-v0", world=world)`` (lidar43) under random
     actions, resetting whenever an episode ends (random driving crashes often, so resets are part of
     it; with a generator kind as ``world`` every reset draws a new scenario)."""
-    with _flatland_drive(world, steps, seed) as drive:
+    return _steps_per_s("flatland", world, steps, seed)
+
+
+def physics3d_steps_per_s(scenario: Scenario, steps: int = 2_000, seed: int = 0) -> float:
+    """Steps per second of ``gymnasium.make("physics3d/WarehouseNav-v0")`` (lidar43, headless, default
+    control period) under random actions, resetting whenever an episode ends."""
+    return _steps_per_s("physics3d", scenario, steps, seed)
+
+
+def _steps_per_s(tier: str, world: Scenario | str | Path, steps: int, seed: int) -> float:
+    with _env_drive(tier, world, steps, seed) as drive:
         start = cpu_seconds()
         drive(range(steps))
         return steps / (cpu_seconds() - start)
 
 
+_ENV_IDS = {"flatland": "flatland/Nav-v0", "physics3d": "physics3d/WarehouseNav-v0"}
+
+
 @contextlib.contextmanager
-def _flatland_drive(world: Scenario | str | Path, steps: int, seed: int = 0) -> Iterator[Callable[[range], Any]]:
-    """The flatland env of :func:`flatland_steps_per_s` warmed up and reset with ``seed``: a
-    function that drives it through steps k of the ``steps`` random actions, resetting as episodes end."""
+def _env_drive(tier: str, world: Scenario | str | Path, steps: int, seed: int = 0) -> Iterator[Callable[[range], Any]]:
+    """A tier's env on ``world`` (lidar43, headless), warmed up and reset with ``seed``: a function
+    that drives it through steps k of ``steps`` random actions, resetting as episodes end."""
     import gymnasium as gym
 
-    import flatland  # noqa: F401  (registers the env)
-
-    env = gym.make("flatland/Nav-v0", world=world if isinstance(world, Scenario) else str(world), observation="lidar43")
+    importlib.import_module(tier)  # registers the env
+    env = gym.make(_ENV_IDS[tier], world=world if isinstance(world, Scenario) else str(world), observation="lidar43")
     try:
         actions = _random_actions(steps, seed)
         env.reset(seed=seed)
@@ -149,7 +162,7 @@ def flatland_and_irsim_steps_per_s(world: Scenario | Path, steps: int, irsim_ste
     """Flatland's steps per second on ``world`` (as :func:`flatland_steps_per_s`) and IR-SIM's on
     the same world (``robot``: its robot, for a world file), the two taking turns; IR-SIM's None
     without it."""
-    with _flatland_drive(world, steps) as flatland, _irsim_drive(world, robot, irsim_steps) as irsim:
+    with _env_drive("flatland", world, steps) as flatland, _irsim_drive(world, robot, irsim_steps) as irsim:
         drives = [(flatland, steps)] + ([] if irsim is None else [(irsim, irsim_steps)])
         rates = steps_per_s_taking_turns(*zip(*drives), rounds)
     return rates[0], (rates[1] if irsim is not None else None)
@@ -356,19 +369,6 @@ def physics3d_bench_scenario() -> Scenario:
     return next(SUITES["warehouse"].scenarios(count=1, template=TEMPLATE))
 
 
-def physics3d_steps_per_s(scenario: Scenario, steps: int = 2_000, seed: int = 0) -> float:
-    """Steps per second of ``gymnasium.make("physics3d/WarehouseNav-v0")`` (lidar43, headless, default
-    control period) under random actions, resetting whenever an episode ends."""
-    import gymnasium as gym
-
-    import physics3d  # noqa: F401  (registers the env)
-
-    env = gym.make("physics3d/WarehouseNav-v0", world=scenario, observation="lidar43")
-    elapsed = _timed_random_drive(env, _random_actions(steps, seed), seed)
-    env.close()
-    return steps / elapsed
-
-
 def gui_figures(steps: int = 300, seed: int = 0) -> dict[str, float]:
     """The PyBullet GUI (``render_mode="human"``, its previews and debug drawing on) under random
     actions: steps per second against real time (one control period per step, which the GUI
@@ -531,7 +531,8 @@ def movers_figures(steps: int) -> dict[str, Any]:
     the same moving world, the three taking turns (:func:`steps_per_s_taking_turns`)."""
     moving = moving_bench_scenario()
     irsim_steps = max(300, steps // 40)
-    with _flatland_drive(moving, steps) as among_movers, _flatland_drive(frozen(moving), steps) as among_statues, \
+    with _env_drive("flatland", moving, steps) as among_movers, \
+            _env_drive("flatland", frozen(moving), steps) as among_statues, \
             _irsim_drive(moving, None, irsim_steps) as irsim:
         drives = [(among_movers, steps), (among_statues, steps)] + ([] if irsim is None else [(irsim, irsim_steps)])
         rates = steps_per_s_taking_turns(*zip(*drives), rounds=25)
@@ -543,15 +544,14 @@ def movers_figures(steps: int) -> dict[str, Any]:
 
 
 def movers3d_figures(steps: int) -> dict[str, Any]:
-    """The 3D env among 10 walking people against the same world frozen (each setting's fastest
-    of three alternated runs)."""
+    """The 3D env among 10 walking people against the same world frozen, the two taking turns
+    (:func:`steps_per_s_taking_turns`)."""
     from physics3d.robot import TEMPLATE
 
     moving = moving_bench_scenario(people=10, template=TEMPLATE)
-    still = frozen(moving)
-    fastest = fastest_alternated({"moving": lambda: physics3d_steps_per_s(moving, steps),
-                                  "frozen": lambda: physics3d_steps_per_s(still, steps)}, runs=3)
-    flat, static = fastest["moving"], fastest["frozen"]
+    with _env_drive("physics3d", moving, steps) as among_movers, \
+            _env_drive("physics3d", frozen(moving), steps) as among_statues:
+        flat, static = steps_per_s_taking_turns([among_movers, among_statues], [steps, steps], rounds=10)
     return {"physics3d_movers_steps_per_s": round(flat, 1), "physics3d_movers_frozen_steps_per_s": round(static, 1),
             "physics3d_movers_vs_static": round(flat / static, 3)}
 
