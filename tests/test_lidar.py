@@ -203,6 +203,36 @@ def test_unobstructed_obstacles_are_invisible():
     assert_allclose(seen[2:4], (2.5, 2.5), atol=1e-12)
 
 
+# --- movers: circles and boxes handed over each scan ---------------------------------------------
+
+
+def _movers_fan() -> Lidar:
+    # Beams at -pi, -pi/2, 0, pi/2, pi; a wall 9 m to the right.
+    return make_lidar(LidarSpec(beams=5, range_max=RANGE_MAX, repeat_end_beam=True), segments=[(-9.0, -9.0, 9.0, -9.0)])
+
+
+def test_movers_are_seen_where_their_tables_say_now_each_scan():
+    # The movers rewrite the same two arrays in place every step: each scan reads them afresh.
+    lidar = _movers_fan()
+    circles, boxes = np.array([[3.0, 0.0, 0.5]]), np.array([box_row(0.0, 4.0, 1.0, 1.0)])
+    assert_allclose(lidar.scan(0.0, 0.0, 0.0, circles, boxes), (RANGE_MAX, 9.0, 2.5, 3.5, RANGE_MAX), atol=1e-12)
+    circles[0, 0], boxes[0, 1] = 6.0, 2.0
+    assert_allclose(lidar.scan(0.0, 0.0, 0.0, circles, boxes), (RANGE_MAX, 9.0, 5.5, 1.5, RANGE_MAX), atol=1e-12)
+
+
+def test_movers_tables_of_any_layout_scan_as_their_float_c_order_copies():
+    lidar = _movers_fan()
+    wide = np.zeros((2, 6))
+    wide[:, :3] = [[3.0, 0.0, 0.5], [0.0, -2.0, 0.25]]
+    circles = wide[:, :3]  # a strided view: not what the compiled scan may read directly
+    boxes = np.asfortranarray([box_row(0.0, 4.0, 1.0, 1.0), box_row(-5.0, 0.0, 2.0, 2.0)])
+    expected = lidar.scan(0.0, 0.0, 0.0, np.ascontiguousarray(circles), np.ascontiguousarray(boxes))
+    assert_array_equal(lidar.scan(0.0, 0.0, 0.0, circles, boxes), expected)
+    assert_allclose(expected, (4.0, 1.75, 2.5, 3.5, 4.0), atol=1e-12)
+    wide[0, 0] = 6.0  # moved through the view: a copy kept from the last scan would not see it
+    assert lidar.scan(0.0, 0.0, 0.0, circles, boxes)[2] == pytest.approx(5.5)
+
+
 # --- noise -------------------------------------------------------------------------------------
 
 
