@@ -19,8 +19,9 @@ from common.errors import ConfigError
 from common.irsim_geometry import circle_outline, rectangle_outline
 from common.kernel_cache import compiled_for
 from common.motion.rvo import rvo_velocity
+from common.motion.packing import pack
 from common.motion.step import (
-    COLLISION_MODES, command, desired_velocity, draw_wanderers, finish_step, gather, move, plan_step, prepare,
+    COLLISION_MODES, command, desired_velocity, draw_wanderers, finish_packed, gather, move, plan_step, prepare,
     snapshot, sync_robot,
 )
 from common.motion.steering import world_to_diff, world_to_omni
@@ -100,18 +101,27 @@ class Movers:
         if t.irsim:
             self._outline = (rectangle_outline(robot.length, robot.width) if box else circle_outline(robot.radius)) \
                 + (robot.footprint_offset, 0.0)
-        # finish_step's arguments before and after the robot's pose and command, gathered once:
-        # gathering its thirty-odd arguments anew took a tenth of a crowd's step.
-        self._before_robot = (t.F, t.I, t.params, t.goals, t.routes, t.objects, t.segments, t.outlines, t.irsim,
-                              self._dt, self._neighbors, self._outline, self._robot)
-        self._after_robot = (self._python, self._mode, *self._contacts, self._moving, self._circles, self._boxes,
-                             self._states, self._circle_rows, self._box_rows, t.orca_velocity, self._members,
-                             self._inside)
+        self._pack(t)
         # Its machine code for exactly these arguments: matching them to a signature anew every
         # call took a fifth of the call. The pose and command go in as floats and ``stopped`` as a
         # bool whatever their Python type (numba's unboxing converts numbers).
-        self._finish_step = compiled_for(finish_step, *self._before_robot, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False,
-                                         *self._after_robot)
+        self._finish_step = compiled_for(finish_packed, *self._packed, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False)
+
+    def _pack(self, t: MoverTable) -> None:
+        """Move the arrays the compiled step reads and writes into one float and one integer buffer
+        (:mod:`common.motion.packing`), every name here and in the table then a view of them, and
+        gather :func:`finish_packed`'s arguments but the robot's pose and command."""
+        floats, float_layout, views = pack([t.F, t.params, t.goals, t.routes, t.objects, t.segments, t.outlines,
+                                            self._neighbors, self._outline, self._robot, *self._contacts[:4],
+                                            self._states, self._circle_rows, self._box_rows], np.float64)
+        (t.F, t.params, t.goals, t.routes, t.objects, t.segments, t.outlines, self._neighbors, self._outline,
+         self._robot, circles, boxes, walls, rings, self._states, self._circle_rows, self._box_rows) = views
+        ints, int_layout, views = pack([t.I, self._contacts[4], self._moving, self._circles, self._boxes,
+                                        self._members], np.int64)
+        t.I, ring_index, self._moving, self._circles, self._boxes, self._members = views
+        self._contacts = (circles, boxes, walls, rings, ring_index)
+        self._packed = (floats, float_layout, ints, int_layout, t.orca_velocity, self._inside, t.irsim, self._dt,
+                        self._python, self._mode)
 
     def reset(self, pose: tuple[float, float, float]) -> None:
         """Every mover back at its start with its first goal and its first command; the robot at
@@ -166,8 +176,7 @@ class Movers:
         if self._python:
             self._advance_in_python(pose, v, w, lateral, stopped)
         x, y, yaw = pose
-        touched, self._wanderer_arrived = self._finish_step(*self._before_robot, x, y, yaw, v, w, lateral, stopped,
-                                                            *self._after_robot)
+        touched, self._wanderer_arrived = self._finish_step(*self._packed, x, y, yaw, v, w, lateral, stopped)
         return -1 if touched < 0 else int(np.searchsorted(self._moving, touched))
 
     def _advance_in_python(self, pose: tuple[float, float, float], v: float, w: float, lateral: float,

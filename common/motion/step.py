@@ -25,6 +25,7 @@ from common.irsim_geometry import centroid
 from common.kernel_cache import kernel, uncounted
 from common.kinematics import unicycle_euler
 from common.motion.orca import orca_velocities
+from common.motion.packing import view1, view2, view3
 from common.motion.sfm import SOCIAL, VMAX, desire, pair_force, social_force_velocity, velocity_under
 from common.motion.steering import (
     desired_omni_velocity, diff_dash, omni_dash, omni_to_world, world_to_diff, world_to_omni, wrap_to_pi,
@@ -538,3 +539,20 @@ def finish_step(F, I, params, goals, routes, objects, segments, outlines, irsim,
     for m in range(F.shape[0]):
         wanders = wanders or (I[m, WANDER] == 1 and I[m, ARRIVED] == 1 and I[m, STOPPED] == 0)
     return touched, wanders
+
+
+@kernel
+def finish_packed(floats, float_layout, ints, int_layout, orca_velocity, inside, irsim, dt, advanced, mode,  # noqa: E741
+                  x, y, yaw, v, w, lateral, stopped) -> tuple[int, bool]:
+    """:func:`finish_step` with its float64 and int64 arrays packed (:mod:`common.motion.packing`),
+    the floats in the order F, params, goals, routes, objects, segments, outlines, neighbors,
+    outline, robot, circles, boxes, walls, rings, states, circle_rows, box_rows, and the integers
+    I, ring_index, moving, seen_circles, seen_boxes, members (:class:`~common.motion.movers.Movers`
+    packs them so): one call hands over six arrays instead of twenty-five."""
+    f, fl, i, il = floats, float_layout, ints, int_layout
+    return finish_step(view2(f, fl, 0), view2(i, il, 0), view2(f, fl, 1), view3(f, fl, 2), view3(f, fl, 3),
+                       view2(f, fl, 4), view2(f, fl, 5), view3(f, fl, 6), irsim, dt, view2(f, fl, 7), view2(f, fl, 8),
+                       view1(f, fl, 9), x, y, yaw, v, w, lateral, stopped, advanced, mode, view2(f, fl, 10),
+                       view2(f, fl, 11), view2(f, fl, 12), view2(f, fl, 13), view2(i, il, 1), view1(i, il, 2),
+                       view1(i, il, 3), view1(i, il, 4), view2(f, fl, 14), view2(f, fl, 15), view2(f, fl, 16),
+                       orca_velocity, view2(i, il, 5), inside)
