@@ -9,9 +9,10 @@ IR-SIM, are judged, and the groups plan the next step. The movers' poses then go
 
 from __future__ import annotations
 
+import functools
 import math
 
-from typing import NamedTuple
+from typing import Callable, NamedTuple
 
 import numpy as np
 
@@ -40,6 +41,19 @@ def mover_generator(seed: int | None) -> np.random.Generator:
     """The generator a world's movers draw from (a wanderer's next goals) for an episode ``seed``:
     every tier makes the same one, whatever else it draws from the seed."""
     return np.random.default_rng(None if seed is None else [seed, _MOVERS_STREAM])
+
+
+@functools.cache
+def finish_code() -> Callable:
+    """:func:`finish_packed`'s machine code for the arguments :class:`Movers` packs, whose types
+    never vary: called directly, a step skips the dispatcher's matching of them to a signature
+    (a fifth of the call), and looked up once a process, a new scenario's movers skip it too (a
+    quarter of building a crowd's). The pose and command go in as floats and ``stopped`` as a bool
+    whatever their Python type (numba's unboxing converts numbers)."""
+    layout = np.empty((0, 4), dtype=np.int64)
+    return compiled_for(finish_packed, np.empty(0), layout, np.empty(0, dtype=np.int64), layout,
+                        np.empty((0, 2), dtype=np.float32), np.empty((0, 0), dtype=np.bool_), False, 0.0, False, 0,
+                        0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False)
 
 
 class MoverStates(NamedTuple):
@@ -102,10 +116,7 @@ class Movers:
             self._outline = (rectangle_outline(robot.length, robot.width) if box else circle_outline(robot.radius)) \
                 + (robot.footprint_offset, 0.0)
         self._pack(t)
-        # Its machine code for exactly these arguments: matching them to a signature anew every
-        # call took a fifth of the call. The pose and command go in as floats and ``stopped`` as a
-        # bool whatever their Python type (numba's unboxing converts numbers).
-        self._finish_step = compiled_for(finish_packed, *self._packed, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False)
+        self._finish_step = finish_code()
 
     def _pack(self, t: MoverTable) -> None:
         """Move the arrays the compiled step reads and writes into one float and one integer buffer

@@ -10,6 +10,7 @@ ran 0.7–4.2% faster packed (four runs, the two taking turns in one process).
 
 from __future__ import annotations
 
+import math
 from typing import Sequence
 
 import numpy as np
@@ -22,21 +23,22 @@ def pack(arrays: Sequence[np.ndarray], dtype: type) -> tuple[np.ndarray, np.ndar
     """One buffer of ``dtype`` holding ``arrays`` (each of one to three dimensions, copied in C
     order), its layout (one row per array: where it starts, then its shape padded with 1s) and
     the arrays again as C-contiguous views of the buffer, in order."""
-    shapes = [np.shape(array) for array in arrays]
+    shapes = [array.shape for array in arrays]
     if any(not 1 <= len(shape) <= 3 for shape in shapes):
         raise ValueError(f"pack takes arrays of one to three dimensions, got shapes {shapes}")
-    sizes = [int(np.prod(shape)) for shape in shapes]
-    starts = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-    buffer = np.empty(int(starts[-1]), dtype=dtype)
-    layout = np.ones((len(arrays), 4), dtype=np.int64)
+    # Plain Python arithmetic: NumPy's per-call overhead would cost more than the copies (a world
+    # of movers is packed once per scenario, and training draws a scenario every episode).
+    layout, start = [], 0
+    for shape in shapes:
+        layout.append((start, *shape, *(1,) * (3 - len(shape))))
+        start += math.prod(shape)
+    buffer = np.empty(start, dtype=dtype)
     views = []
-    for k, (array, shape) in enumerate(zip(arrays, shapes)):
-        layout[k, OFFSET] = starts[k]
-        layout[k, ROWS:ROWS + len(shape)] = shape
-        view = buffer[starts[k]:starts[k + 1]].reshape(shape)
+    for array, shape, (first, *_) in zip(arrays, shapes, layout):
+        view = buffer[first:first + math.prod(shape)].reshape(shape)
         view[...] = array
         views.append(view)
-    return buffer, layout, views
+    return buffer, np.array(layout, dtype=np.int64).reshape(-1, 4), views
 
 
 @register_jitable
