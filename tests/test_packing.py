@@ -37,43 +37,33 @@ def test_pack_refuses_what_it_cannot_rebuild():
         pack([np.zeros(2), np.zeros((1, 1, 1, 1))], np.float64)
 
 
-RVO_WORLD = """\
-world: {height: 10, width: 10, step_time: 0.1, collision_mode: stop}
-robot:
-  - kinematics: {name: diff}
-    shape: {name: rectangle, length: 0.5, width: 0.4}
-    state: [1, 1, 0]
-    goal: [9, 9, 0]
-obstacle:
-  - number: 3
-    distribution: {name: circle, radius: 3, center: [5, 5]}
-    kinematics: {name: omni}
-    shape: {name: circle, radius: 0.3}
-    behavior: {name: rvo, vxmax: 1.0, vymax: 1.0, acce: 1.0, factor: 2.0, mode: hrvo}
-  - shape: {name: polygon, vertices: [[7, 1], [8, 1], [8, 2]]}
-"""
-
-
-def _worlds(tmp_path):
-    import flatland
+def _worlds():
     from common.generators import generate
+    from common.motion.spec import Motion, Rvo
+    from common.scenario import CircleObstacle, PolygonObstacle, RobotProfile, Scenario
     from physics3d.robot import TEMPLATE
 
-    (tmp_path / "rvo.yaml").write_text(RVO_WORLD)
     yield from (generate("crowd", 1, 1.0, "eval", None, reacting=True, behavior=behavior) for behavior in ("sfm", "orca"))
     yield generate("warehouse_moving", 2, 1.0, "eval")
     yield generate("crowd", 3, 0.5, "eval", TEMPLATE, reacting=False, behavior="sfm")
-    yield flatland.load_world(tmp_path / "rvo.yaml").scenario  # an IR-SIM world: polygons, rvo in Python
+    # IR-SIM's rvo (stepped in Python first), a box robot and a polygon to keep off.
+    walkers = [CircleObstacle(x=x, y=5.0, radius=0.3, motion=Motion(behavior=Rvo(), goals=[(10.0 - x, 5.0)]))
+               for x in (3.0, 7.0)]
+    yield Scenario(robot=RobotProfile(shape="box", length=0.5, width=0.4), start=(1.0, 1.0, 0.0), goal=(9.0, 9.0),
+                   obstacles=[*walkers, PolygonObstacle(vertices=[(7.0, 1.0), (8.0, 1.0), (8.0, 2.0)])])
 
 
-def test_every_world_of_movers_packs_into_the_types_its_step_was_compiled_for(tmp_path):
+def test_every_world_of_movers_packs_into_the_types_its_step_was_compiled_for():
     # The movers' step is called through machine code looked up once for these types: a world
     # whose packed arguments typed otherwise would have its arrays misread, not refused.
     from common.kernel_cache import compiled_for
     from common.motion.movers import Movers, finish_code
     from common.motion.step import finish_packed
 
-    for scenario in _worlds(tmp_path):
+    in_python = []
+    for scenario in _worlds():
         movers = Movers(scenario)
         assert movers.count > 0
         assert compiled_for(finish_packed, *movers._packed, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False) is finish_code()
+        in_python.append(movers._python)
+    assert in_python == [False] * 4 + [True]  # the rvo world steps its movers in Python first

@@ -157,15 +157,21 @@ def steps_per_s_taking_turns(drives: Sequence[Callable[[range], Any]], steps: Se
     return [n / seconds for n, seconds in zip(steps, spent)]
 
 
-def flatland_and_irsim_steps_per_s(world: Scenario | Path, steps: int, irsim_steps: int,
-                                   robot: RobotProfile | None = None, rounds: int = 20) -> tuple[float, float | None]:
-    """Flatland's steps per second on ``world`` (as :func:`flatland_steps_per_s`) and IR-SIM's on
-    the same world (``robot``: its robot, for a world file), the two taking turns; IR-SIM's None
-    without it."""
-    with _env_drive("flatland", world, steps) as flatland, _irsim_drive(world, robot, irsim_steps) as irsim:
-        drives = [(flatland, steps)] + ([] if irsim is None else [(irsim, irsim_steps)])
-        rates = steps_per_s_taking_turns(*zip(*drives), rounds)
-    return rates[0], (rates[1] if irsim is not None else None)
+def flatland_and_irsim_steps_per_s(worlds: Sequence[Scenario | Path], steps: int, irsim_steps: int,
+                                   robot: RobotProfile | None = None,
+                                   rounds: int = 20) -> tuple[list[float], float | None]:
+    """Flatland's steps per second on each of ``worlds`` (as :func:`flatland_steps_per_s`) and
+    IR-SIM's on the first of them (``robot``: its robot, for a world file), all taking turns;
+    IR-SIM's None without it."""
+    with contextlib.ExitStack() as stack:
+        drives = [stack.enter_context(_env_drive("flatland", world, steps)) for world in worlds]
+        irsim = stack.enter_context(_irsim_drive(worlds[0], robot, irsim_steps))
+        counts = [steps] * len(worlds)
+        if irsim is not None:
+            drives.append(irsim)
+            counts.append(irsim_steps)
+        rates = steps_per_s_taking_turns(drives, counts, rounds)
+    return rates[:len(worlds)], (rates[-1] if irsim is not None else None)
 
 
 CIRCLE_WORLD = {
@@ -212,7 +218,8 @@ def _irsim_file_figures(key: str, data: dict, steps: int) -> dict[str, Any]:
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / f"{key}.yaml"
         path.write_text(yaml.safe_dump(data))
-        flat, theirs = flatland_and_irsim_steps_per_s(path, steps, max(500, steps // 10), WorldFile(path).initial.robot)
+        (flat,), theirs = flatland_and_irsim_steps_per_s([path], steps, max(500, steps // 10),
+                                                         WorldFile(path).initial.robot)
     return {f"{key}_flatland_steps_per_s": round(flat, 1),
             f"{key}_irsim_steps_per_s": None if theirs is None else round(theirs, 1),
             f"{key}_flatland_vs_irsim": None if theirs is None else round(flat / theirs, 1)}
@@ -406,47 +413,36 @@ def physics3d_and_bare(scenario: Scenario, steps: int, chunk: int = 100, seed: i
     same random actions, the world's sub-steps and one ``rayTestBatch`` of the lidar's beams; the
     robot is put back at the start after the steps where the env reset, so both drive the same
     episodes."""
-    import gymnasium as gym
     import pybullet as p
 
-    import physics3d  # noqa: F401  (registers the env)
     from common.kinematics import wheel_speeds
     from physics3d.robot import MOTOR_FORCE, WHEEL_BASE, WHEEL_RADIUS, yaw_of
     from physics3d.world import World
 
-    actions = _random_actions(steps, seed)
     mapping = ActionMapping(scenario.robot)
-    targets = [wheel_speeds(*mapping.to_velocity(action), WHEEL_RADIUS, WHEEL_BASE) for action in actions]
-    # Each round the env drives the first chunk left, then the bare loop replays it and drops it.
-    turns = [range(first, min(steps, first + chunk)) for first in range(0, steps, chunk)]
+    targets = [wheel_speeds(*mapping.to_velocity(action), WHEEL_RADIUS, WHEEL_BASE)
+               for action in _random_actions(steps, seed)]  # the actions the env's drive takes
     resets: set[int] = set()  # the steps after which the env reset, for the bare loop to replay
 
-    def env_turn() -> None:
-        resets.update(_drive(env, actions, turns[0]))
-
-    def bare_turn() -> None:
-        for k in turns.pop(0):
-            p.setJointMotorControlArray(robot.id, robot.wheels, p.VELOCITY_CONTROL, targetVelocities=targets[k],
-                                        forces=(MOTOR_FORCE, MOTOR_FORCE), physicsClientId=client)
-            for _ in range(substeps):
-                p.stepSimulation(physicsClientId=client)
-            (x, y, z), orientation = p.getBasePositionAndOrientation(robot.id, physicsClientId=client)
-            p.rayTestBatch(*rays(x, y, z, yaw_of(orientation)), physicsClientId=client)
-            if k in resets:
-                world.reset()
-
-    env = gym.make("physics3d/WarehouseNav-v0", world=scenario, observation="lidar43")
-    world = None
-    try:
-        world = World(scenario, seed=seed)
+    with _env_drive("physics3d", scenario, steps, seed) as drive, contextlib.closing(World(scenario, seed=seed)) as world:
+        # Two PyBullet clients are open at once: neither outlives a failure.
         client, robot, substeps, rays = world.client, world.robot, world.substeps, world.lidar.rays
-        env.reset(seed=seed)
-        spent_env, spent_bare = _cpu_seconds_taking_turns([env_turn, bare_turn], len(turns))
-    finally:  # two PyBullet clients are open at once: neither outlives a failure
-        env.close()
-        if world is not None:
-            world.close()
-    return steps / spent_env, steps / spent_bare
+
+        def bare(indices: range) -> None:
+            for k in indices:
+                p.setJointMotorControlArray(robot.id, robot.wheels, p.VELOCITY_CONTROL, targetVelocities=targets[k],
+                                            forces=(MOTOR_FORCE, MOTOR_FORCE), physicsClientId=client)
+                for _ in range(substeps):
+                    p.stepSimulation(physicsClientId=client)
+                (x, y, z), orientation = p.getBasePositionAndOrientation(robot.id, physicsClientId=client)
+                p.rayTestBatch(*rays(x, y, z, yaw_of(orientation)), physicsClientId=client)
+                if k in resets:
+                    world.reset()
+
+        # Each round the env drives a chunk, then the bare loop replays it.
+        env_rate, bare_rate = steps_per_s_taking_turns([lambda indices: resets.update(drive(indices)), bare],
+                                                       [steps, steps], rounds=-(-steps // chunk))
+    return env_rate, bare_rate
 
 
 def camera_fps(scenario: Scenario, frames: int = 100) -> float:
@@ -530,13 +526,8 @@ def movers_figures(steps: int) -> dict[str, Any]:
     """The env among 20 walking people against the same world frozen, and IR-SIM's own steps on
     the same moving world, the three taking turns (:func:`steps_per_s_taking_turns`)."""
     moving = moving_bench_scenario()
-    irsim_steps = max(300, steps // 40)
-    with _env_drive("flatland", moving, steps) as among_movers, \
-            _env_drive("flatland", frozen(moving), steps) as among_statues, \
-            _irsim_drive(moving, None, irsim_steps) as irsim:
-        drives = [(among_movers, steps), (among_statues, steps)] + ([] if irsim is None else [(irsim, irsim_steps)])
-        rates = steps_per_s_taking_turns(*zip(*drives), rounds=25)
-    flat, static, theirs = rates[0], rates[1], (rates[2] if irsim is not None else None)
+    (flat, static), theirs = flatland_and_irsim_steps_per_s([moving, frozen(moving)], steps, max(300, steps // 40),
+                                                            rounds=25)
     return {"movers_env_steps_per_s": round(flat, 1), "movers_frozen_env_steps_per_s": round(static, 1),
             "movers_vs_static": round(flat / static, 3),
             "movers_irsim_steps_per_s": None if theirs is None else round(theirs, 1),
@@ -617,7 +608,7 @@ def onnx_figures(calls: int = 20_000, policies: Sequence[str] = ("stage1_2d_ppo"
 def run_benchmarks(steps: int = 20_000) -> dict[str, Any]:
     """All figures of this milestone, as one flat mapping."""
     scenario = bench_scenario()
-    flat, irsim = flatland_and_irsim_steps_per_s(scenario, steps, max(500, steps // 10))
+    (flat,), irsim = flatland_and_irsim_steps_per_s([scenario], steps, max(500, steps // 10))
     scenario3d = physics3d_bench_scenario()
     steps3d = max(500, steps // 5)
     env3d, bare3d = physics3d_and_bare(scenario3d, steps3d)
