@@ -30,6 +30,7 @@ from scipy import stats
 from common.conditions import Conditions
 from common.geometry import box_distance
 from common.readings import Readings
+from common.route import Route
 from common.scenario import LidarSpec, RobotProfile, Scenario
 from common.task import DEFAULT_MAX_STEPS, OUTCOMES, Task
 from common.tiers import make_world
@@ -42,7 +43,9 @@ class Agent(Protocol):
     """What the evaluator drives: the controller interface (policies are wrapped to it).
 
     ``bind`` tells the agent the robot, its lidar and the radius it must drive into; an agent may
-    also carry ``max_steps``, the episode length it expects (a policy's, from its manifest).
+    also carry ``max_steps``, the episode length it expects (a policy's, from its manifest), and
+    ``reads_route`` with ``follow(route)``, to be given a route on the static map each episode
+    (:func:`start_agent`).
     """
 
     name: str
@@ -122,6 +125,16 @@ def shortest_path_length(scenario: Scenario, goal_radius: float | None = None, r
     return max(length - (scenario.goal_threshold if goal_radius is None else goal_radius), 0.0)
 
 
+def start_agent(agent: Agent, scenario: Scenario, goal_radius: float) -> None:
+    """Bind ``agent`` to the scenario's robot and sensors and start its episode; an agent that
+    reads a route on the static map (a policy observing ``lidar51_route``) is given the route a
+    global planner would give it (:mod:`common.route`)."""
+    agent.bind(scenario.robot, scenario.lidar, goal_radius)
+    agent.reset()
+    if getattr(agent, "reads_route", False):
+        agent.follow(Route(scenario, goal_radius))
+
+
 def episode_limit(agent: Agent, max_steps: int | None) -> int:
     """``max_steps`` if given, else the agent's own episode length, else :data:`DEFAULT_MAX_STEPS`."""
     return max_steps if max_steps is not None else getattr(agent, "max_steps", None) or DEFAULT_MAX_STEPS
@@ -148,8 +161,7 @@ def run_episode(
         scenario = world.scenario  # as conditioned: the robot the agent drives, its sensors' noise
         readings = world.reset(seed=seed)
         task.start(scenario, readings)
-        agent.bind(scenario.robot, scenario.lidar, task.radius)
-        agent.reset()
+        start_agent(agent, scenario, task.radius)
         social = SocialRecord(scenario.robot)
         social(readings)
         if on_step:

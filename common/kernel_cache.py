@@ -33,7 +33,7 @@ KERNEL_MODULES = (
     "common/motion/packing.py", "common/motion/sfm.py", "common/motion/steering.py", "common/motion/step.py",
     "common/motion/table.py",
     "common/moving_kinds.py", "common/observations.py", "common/planners/astar.py", "common/planners/collision.py",
-    "common/planners/footprint.py", "common/planners/rrt.py", "common/planners/smoothing.py", "common/readings.py",
+    "common/planners/footprint.py", "common/planners/rrt.py", "common/planners/smoothing.py", "common/readings.py", "common/route.py",
     "flatland/clearance.py", "flatland/free_step.py", "flatland/lidar.py",
 )
 

@@ -18,6 +18,7 @@ from common.observations import DEFAULT_GOAL_DISTANCE_SCALE, ObservationLayout, 
 from common.readings import Readings, nearest_clearance, nearest_return
 from common.robots import footprint_reach
 from common.rewards import Reward, StepContext
+from common.route import Route
 from common.conditions import Conditions
 from common.scenario import Scenario
 from common.sources import ScenarioSource
@@ -58,6 +59,9 @@ class NavigationEnv(gym.Env):
         self.goal_distance_scale = goal_distance_scale
         self.reward = Reward(reward)
         self._reads_heading = self.reward.reads("heading_error")
+        self._reads_route = self.reward.reads("route_gain")
+        self._route: Route | None = None
+        self._route_distance = 0.0
         self.world: WorldLike | None = None
         self._drawn: Scenario | None = None
         self._load(self.source.draw(np.random.default_rng(0)))
@@ -114,11 +118,22 @@ class NavigationEnv(gym.Env):
         self.task.start(scenario, self._readings, self.np_random)
         self.reward.reset()
         self.layout.reset()
+        if self.layout.reads_route or self._reads_route:
+            self._plan_route(scenario)
         self.trajectory = [tuple(self._readings.pose[:2])]
         if self.render_mode == "human":
             self.render()
         info = Info(distance=self.task.distance, scenario=scenario.name, goal_threshold=self.task.radius)
         return self.layout(self._readings, self._goal), info
+
+    def _plan_route(self, scenario: Scenario) -> None:
+        """The episode's route on the static map, for the layout and the reward that read one (a
+        fixed world's route is planned once)."""
+        route = self._route
+        if route is None or route.scenario is not scenario or route.goal_radius != self.task.radius:
+            route = self._route = Route(scenario, self.task.radius)
+        self.layout.follow(route)
+        self._route_distance = route.distance(*self._readings.pose[:2])
 
     def step(self, action) -> tuple[np.ndarray, float, bool, bool, dict]:
         if self._closed:
@@ -136,8 +151,12 @@ class NavigationEnv(gym.Env):
             x, y, yaw = readings.pose
             bearing = wrap_angle(math.atan2(self._goal[1] - y, self._goal[0] - x) - yaw)
         clearance = math.inf if self._reach is None else nearest_clearance(readings.lidar, self._reach)
+        route_gain = 0.0
+        if self._reads_route:
+            previous_route, self._route_distance = self._route_distance, self._route.distance(*readings.pose[:2])
+            route_gain = previous_route - self._route_distance
         ctx = StepContext(task.distance, previous, bearing, v, w, nearest_return(readings.lidar), readings.collided, reached,
-                          clearance)
+                          clearance, route_gain)
         reward, shares = self.reward(ctx)
         # A crash is a termination, not a truncation: its value must not bootstrap from the next state.
         terminated = reached or outcome == "collision"

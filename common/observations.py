@@ -69,6 +69,20 @@ long as anything is within its bounding circle). Then the robot itself:
 48    1 for a box footprint, 0 for a circle                                 0    1
 ====  ==================================================================  ====  ===
 
+``lidar51_route``: ``lidar49_robot`` and the route a global planner gives it on the static map
+(:mod:`common.route`): where the route is ``ROUTE_LOOKAHEAD`` (1 m) further on, from the odometry
+pose, in the robot's frame. Among thin posts the goal's bearing points at the fence; this points
+at the gap. The env and a policy agent plan the route at each episode's start
+(:meth:`ObservationLayout.follow`); without one, these entries read the goal itself:
+
+====  ==================================================================  ====  ===
+49    route point ahead, x in the robot's frame (forward) / 1 m              -1    1
+50    route point ahead, y in the robot's frame (left) / 1 m                 -1    1
+====  ==================================================================  ====  ===
+
+The route point is the goal once the goal is nearer than 1 m down the route, so the entries'
+length falls below 1 only on the last metre.
+
 A lidar with other than 36 beams is reduced to 36 sectors of consecutive beams, each reading its
 nearest return. Values are clipped into the bounds (sensor noise may push them out).
 """
@@ -88,9 +102,11 @@ from common.kernel_cache import kernel, uncounted
 from common.kinematics import wrap_angle
 from common.readings import Readings
 from common.robots import footprint_reach
+from common.route import Route
 from common.scenario import LidarSpec, RobotProfile
 
-LAYOUTS = ("nav7", "lidar43", "lidar43_log", "lidar79_motion", "lidar49_robot")
+LAYOUTS = ("nav7", "lidar43", "lidar43_log", "lidar79_motion", "lidar49_robot", "lidar51_route")
+ROUTE_LOOKAHEAD = 1.0  # m
 RANGE_RATE_SCALE = 3.0  # m/s
 _TWO_PI = 2.0 * math.pi
 # Neighbouring returns further apart than this in range are two surfaces (an edge), not one to
@@ -102,13 +118,15 @@ DEFAULT_GOAL_DISTANCE_SCALE = 10.0
 
 @dataclass(frozen=True)
 class ObservationLayout:
-    """A named layout: its Box space, the function that fills it, and (for a layout with memory)
-    the function that forgets the last episode."""
+    """A named layout: its Box space, the function that fills it, (for a layout with memory) the
+    function that forgets the last episode and (for one that reads a route) the function that
+    takes an episode's route."""
 
     name: str
     space: spaces.Box
     compute: Callable[[Readings, tuple[float, float]], np.ndarray]
     forget: Callable[[], None] = lambda: None
+    take_route: Callable[[Route], None] | None = None
 
     def __call__(self, readings: Readings, goal: tuple[float, float]) -> np.ndarray:
         return self.compute(readings, goal)
@@ -116,6 +134,16 @@ class ObservationLayout:
     def reset(self) -> None:
         """Start a new episode (call before its first observation)."""
         self.forget()
+
+    @property
+    def reads_route(self) -> bool:
+        """Whether it reads a route on the static map (give it one with :meth:`follow`)."""
+        return self.take_route is not None
+
+    def follow(self, route: Route) -> None:
+        """Read this episode's route (after :meth:`reset`)."""
+        if self.take_route is not None:
+            self.take_route(route)
 
 
 @uncounted
@@ -191,6 +219,8 @@ def make_layout(
         return _motion_layout(robot, lidar, goal_distance_scale)
     elif name == "lidar49_robot":
         return _robot_layout(robot, lidar, goal_distance_scale)
+    elif name == "lidar51_route":
+        return _route_layout(robot, lidar, goal_distance_scale)
     elif name in ("lidar43", "lidar43_log"):
         floor = min(robot.bounding_radius, 0.5 * lidar.range_max)
         log_scale = 1.0 / math.log(lidar.range_max / floor) if name == "lidar43_log" else 0.0
@@ -341,3 +371,30 @@ def _motion_layout(robot: RobotProfile, lidar: LidarSpec, goal_distance_scale: f
         last[0] = None
 
     return ObservationLayout("lidar79_motion", spaces.Box(low, high, dtype=np.float32), compute, forget)
+
+
+def _route_layout(robot: RobotProfile, lidar: LidarSpec, goal_distance_scale: float) -> ObservationLayout:
+    """``lidar51_route``: ``lidar49_robot`` and the route point ahead (see the module)."""
+    base = _robot_layout(robot, lidar, goal_distance_scale)
+    low = np.concatenate([base.space.low, -np.ones(2, dtype=np.float32)])
+    high = np.ones(len(low), dtype=np.float32)
+    n = len(base.space.low)
+    route: list[Route | None] = [None]
+
+    def compute(readings: Readings, goal: tuple[float, float]) -> np.ndarray:
+        out = np.empty(len(low), dtype=np.float32)
+        out[:n] = base(readings, goal)
+        x, y, yaw = readings.odometry.pose
+        ahead_x, ahead_y = goal if route[0] is None else route[0].ahead(x, y, ROUTE_LOOKAHEAD)
+        dx, dy, c, s = ahead_x - x, ahead_y - y, math.cos(yaw), math.sin(yaw)
+        out[n] = min(max((c * dx + s * dy) / ROUTE_LOOKAHEAD, -1.0), 1.0)
+        out[n + 1] = min(max((c * dy - s * dx) / ROUTE_LOOKAHEAD, -1.0), 1.0)
+        return out
+
+    def forget() -> None:
+        route[0] = None
+
+    def take_route(given: Route) -> None:
+        route[0] = given
+
+    return ObservationLayout("lidar51_route", spaces.Box(low, high, dtype=np.float32), compute, forget, take_route)

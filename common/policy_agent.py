@@ -14,6 +14,7 @@ from common.actions import ActionMapping
 from common.drive import refuse_other_drives
 from common.observations import ObservationLayout, make_layout
 from common.readings import Readings
+from common.route import Route
 from common.scenario import LidarSpec, RobotProfile
 
 
@@ -78,6 +79,15 @@ class PolicyAgent:
 
     def reset(self) -> None:
         self.layout.reset()  # a layout with memory (lidar79_motion) starts the episode afresh
+
+    @property
+    def reads_route(self) -> bool:
+        """Whether its layout reads a route on the static map (``lidar51_route``)."""
+        return self.layout.reads_route
+
+    def follow(self, route: Route) -> None:
+        """Drive along this episode's route (after :meth:`reset`; see :mod:`common.route`)."""
+        self.layout.follow(route)
 
     def observe(self, readings: Readings, goal: tuple[float, float]) -> np.ndarray:
         obs = self.layout(readings, goal)

@@ -32,12 +32,19 @@ class StepContext(NamedTuple):
     collided: bool
     reached: bool
     clearance: float = math.inf  # nearest return less how far its beam runs inside the footprint, m (see COSTLY_FIELDS)
+    route_gain: float = 0.0  # metres of the route's cost-to-go gained this step (see COSTLY_FIELDS)
 
 
 def progress(ctx: StepContext, positive_only: bool = False) -> float:
     """Metres gained toward the goal this step (only gains, if ``positive_only``)."""
     gained = ctx.prev_distance - ctx.distance
     return max(0.0, gained) if positive_only else gained
+
+
+def route_progress(ctx: StepContext) -> float:
+    """Metres gained along the route to the goal this step (:mod:`common.route`): toward the gap
+    the route goes through, where ``progress`` pays for closing on the goal through the fence."""
+    return ctx.route_gain
 
 
 def heading_alignment(ctx: StepContext, min_distance: float = 1.0) -> float:
@@ -109,6 +116,7 @@ class _Stuck:
 
 TERMS: dict[str, Callable[..., Any]] = {
     "progress": progress,
+    "route_progress": route_progress,
     "heading_alignment": heading_alignment,
     "goal": goal,
     "collision": collision,
@@ -157,8 +165,8 @@ PRESETS: dict[str, dict[str, Any]] = {
 
 
 # The step context's fields that cost the env a computation each step, and the terms that read
-# each: a reward without those terms gets 0 (heading_error) or inf (clearance) there.
-COSTLY_FIELDS = {"heading_error": ("heading_alignment",), "clearance": ("clearance",)}
+# each: a reward without those terms gets 0 (heading_error, route_gain) or inf (clearance) there.
+COSTLY_FIELDS = {"heading_error": ("heading_alignment",), "clearance": ("clearance",), "route_gain": ("route_progress",)}
 
 
 class Reward:

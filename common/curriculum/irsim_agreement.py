@@ -75,6 +75,7 @@ def first_difference(policy_path: str | Path, scenario, seed: int, conditions: C
     (the worlds disagree on a contact otherwise), ``drift`` (the poses part by 1 mm before any
     contact differs: sensing or arithmetic), or ``none``."""
     from common.kinematics import Pose2D
+    from common.evaluation import start_agent
     from common.task import Task
     from common.tiers import make_world
 
@@ -84,8 +85,7 @@ def first_difference(policy_path: str | Path, scenario, seed: int, conditions: C
     readings = [world.reset(seed=seed) for world in worlds]
     task.start(worlds[0].scenario, readings[0])
     for agent, world in zip(agents, worlds):
-        agent.bind(world.scenario.robot, world.scenario.lidar, task.radius)
-        agent.reset()
+        start_agent(agent, world.scenario, task.radius)
     try:
         for _ in range(max_steps):
             readings = [world.step(*agent.act(r, scenario.goal)) for agent, world, r in zip(agents, worlds, readings)]

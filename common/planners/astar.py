@@ -36,7 +36,7 @@ _EIGHTH = math.pi / 4.0
 
 
 @kernel
-def _heap_push(keys: np.ndarray, items: np.ndarray, size: int, key: float, item: int) -> None:
+def heap_push(keys: np.ndarray, items: np.ndarray, size: int, key: float, item: int) -> None:
     """Insert at position ``size`` and sift up (the caller has made room)."""
     i = size
     while i > 0:
@@ -51,7 +51,7 @@ def _heap_push(keys: np.ndarray, items: np.ndarray, size: int, key: float, item:
 
 
 @kernel
-def _heap_pop(keys: np.ndarray, items: np.ndarray, size: int) -> int:
+def heap_pop(keys: np.ndarray, items: np.ndarray, size: int) -> int:
     """Remove and return the item with the smallest key from a heap of ``size`` entries."""
     top = items[0]
     size -= 1
@@ -85,7 +85,7 @@ def _relax(keys: np.ndarray, items: np.ndarray, size: int, g: np.ndarray, parent
     if size == keys.size:  # lazy deletion can hold one entry per relaxation
         keys = np.concatenate((keys, np.empty(keys.size, dtype=np.float64)))
         items = np.concatenate((items, np.empty(items.size, dtype=np.int64)))
-    _heap_push(keys, items, size, cost + h, state)
+    heap_push(keys, items, size, cost + h, state)
     return keys, items, size + 1
 
 
@@ -103,7 +103,7 @@ def _astar(occupied: np.ndarray, start: int, goal: int, neighbours: int) -> np.n
     keys, items, size = _relax(keys, items, 0, g, parent, start, 0.0, -1, 0.0)
     found = False
     while size > 0:
-        current = _heap_pop(keys, items, size)
+        current = heap_pop(keys, items, size)
         size -= 1
         if closed[current]:
             continue  # a stale entry: this cell was already expanded with a smaller g
@@ -171,7 +171,7 @@ def _astar_lattice(field: np.ndarray, occupied: np.ndarray, x0: float, y0: float
         keys, items, size = _relax(keys, items, size, g, parent, start * 8 + k, 0.0, -1, h0)
     found = -1
     while size > 0:
-        current = _heap_pop(keys, items, size)
+        current = heap_pop(keys, items, size)
         size -= 1
         if closed[current]:
             continue
