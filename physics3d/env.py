@@ -29,6 +29,13 @@ class CameraLayout:
     def reset(self) -> None:
         self.state.reset()
 
+    @property
+    def reads_route(self) -> bool:
+        return self.state.reads_route
+
+    def follow(self, route) -> None:
+        self.state.follow(route)
+
     def __call__(self, readings: Readings, goal: tuple[float, float]) -> dict[str, np.ndarray]:
         camera = readings.camera
         return {"state": self.state(readings, goal), "rgb": camera["rgb"], "depth": camera["depth"][..., np.newaxis]}
