@@ -129,7 +129,7 @@ class Route:
         self.scenario = scenario
         width = scenario.robot.width_across
         self.resolution = resolution = min(0.05, width / CELLS_ACROSS)
-        grid = scenario_grid(scenario, resolution, inflation=0.0)
+        self._grid = grid = scenario_grid(scenario, resolution, inflation=0.0)
         self.origin = grid.origin
         self.goal = (float(scenario.goal[0]), float(scenario.goal[1]))
         self.goal_radius = float(goal_radius)
@@ -148,10 +148,7 @@ class Route:
         self.field = _cost_to_go(cost, np.column_stack([rows[inside], cols[inside]]), gap[inside], resolution)
 
     def _cell(self, x: float, y: float) -> tuple[int, int]:
-        rows, cols = self.field.shape
-        col = int(min(max((x - self.origin[0]) / self.resolution, 0), cols - 1))
-        row = int(min(max((y - self.origin[1]) / self.resolution, 0), rows - 1))
-        return row, col
+        return self._grid.cell_of(x, y)
 
     def distance(self, x: float, y: float) -> float:
         """The cost-to-go from (x, y) (bilinear between the open cells around it); the straight
