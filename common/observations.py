@@ -72,7 +72,8 @@ long as anything is within its bounding circle). Then the robot itself:
 ``lidar51_route``: ``lidar49_robot`` and the route a global planner gives it on the static map
 (:mod:`common.route`): where the route is ``ROUTE_LOOKAHEAD`` (1 m) further on, from the odometry
 pose, in the robot's frame. Among thin posts the goal's bearing points at the fence; this points
-at the gap. The env and a policy agent plan the route at each episode's start
+at the gap. The env plans the route at each episode's start, and the evaluator plans it for a
+policy agent (:func:`common.evaluation.start_agent`), each handing it to the layout
 (:meth:`ObservationLayout.follow`); without one, these entries read the goal itself:
 
 ====  ==================================================================  ====  ===

@@ -78,22 +78,38 @@ def _cost_to_go(cost: np.ndarray, seeds: np.ndarray, seed_costs: np.ndarray, res
 
 
 @kernel
-def _walk(field: np.ndarray, row: int, col: int, x0: float, y0: float, resolution: float, reach: float,
-          gx: float, gy: float, threshold: float) -> tuple[float, float, bool]:
-    """Follow the field's steepest descent from (row, col) for ``reach`` metres of cells, stopping
-    early at a cell within ``threshold`` of the goal; the centre of the cell it ends on, and
-    whether it found a finite cell to start from (a cell nearby if its own is closed)."""
+def _cell(field: np.ndarray, x0: float, y0: float, resolution: float, x: float, y: float) -> tuple[int, int]:
+    """The (row, col) of the cell holding (x, y), clamped to the grid (``OccupancyGrid.cell_of``)."""
     rows, cols = field.shape
-    if not math.isfinite(field[row, col]):
-        best, br, bc = np.inf, row, col
-        for dr in range(-2, 3):  # the robot's centre a cell or two into a closed margin
-            for dc in range(-2, 3):
-                r, c = row + dr, col + dc
-                if 0 <= r < rows and 0 <= c < cols and field[r, c] < best:
-                    best, br, bc = field[r, c], r, c
-        if not math.isfinite(best):
-            return gx, gy, False
-        row, col = br, bc
+    return int(min(max((y - y0) / resolution, 0.0), rows - 1)), int(min(max((x - x0) / resolution, 0.0), cols - 1))
+
+
+@kernel
+def _open_near(field: np.ndarray, row: int, col: int) -> tuple[int, int, bool]:
+    """(row, col) if its cost-to-go is finite, else the cell of least finite cost-to-go within two
+    cells of it (the robot's centre a cell or two into a closed margin); and whether there is one."""
+    if math.isfinite(field[row, col]):
+        return row, col, True
+    rows, cols = field.shape
+    best, best_row, best_col = np.inf, row, col
+    for r in range(max(0, row - 2), min(rows, row + 3)):
+        for c in range(max(0, col - 2), min(cols, col + 3)):
+            if field[r, c] < best:
+                best, best_row, best_col = field[r, c], r, c
+    return best_row, best_col, math.isfinite(best)
+
+
+@kernel
+def _walk(field: np.ndarray, x0: float, y0: float, resolution: float, x: float, y: float, reach: float,
+          gx: float, gy: float, threshold: float) -> tuple[float, float, bool]:
+    """Follow the field's steepest descent from the open cell at or beside (x, y)'s for ``reach``
+    metres of cells, stopping early at a cell within ``threshold`` of the goal; the centre of the
+    cell it ends on, and whether there was an open cell to start from."""
+    rows, cols = field.shape
+    row, col = _cell(field, x0, y0, resolution, x, y)
+    row, col, found = _open_near(field, row, col)
+    if not found:
+        return gx, gy, False
     travelled = 0.0
     while travelled < reach:
         cx, cy = x0 + (col + 0.5) * resolution, y0 + (row + 0.5) * resolution
@@ -111,6 +127,33 @@ def _walk(field: np.ndarray, row: int, col: int, x0: float, y0: float, resolutio
     return x0 + (col + 0.5) * resolution, y0 + (row + 0.5) * resolution, True
 
 
+@kernel
+def _cost_at(field: np.ndarray, x0: float, y0: float, resolution: float, x: float, y: float, gx: float,
+             gy: float) -> float:
+    """The cost-to-go at (x, y): bilinear between the open cells around it; beside a closed cell,
+    the nearest open cell's plus the way to it (:func:`_open_near`); with no open cell near, the
+    straight distance to the goal. Compiled: the reward reads it every step."""
+    rows, cols = field.shape
+    u, v = (x - x0) / resolution - 0.5, (y - y0) / resolution - 0.5
+    c0, r0 = int(math.floor(u)), int(math.floor(v))
+    total = weight = 0.0
+    for r in (r0, r0 + 1):
+        wr = 1.0 - abs(v - r)
+        for c in (c0, c0 + 1):
+            if 0 <= r < rows and 0 <= c < cols and math.isfinite(field[r, c]):
+                wc = 1.0 - abs(u - c)
+                total += wr * wc * field[r, c]
+                weight += wr * wc
+    if weight > 1e-9:
+        return total / weight
+    row, col = _cell(field, x0, y0, resolution, x, y)
+    row, col, found = _open_near(field, row, col)
+    if found:
+        cx, cy = x0 + (col + 0.5) * resolution, y0 + (row + 0.5) * resolution
+        return field[row, col] + math.hypot(cx - x, cy - y)
+    return math.hypot(gx - x, gy - y)
+
+
 def _clearance(occupied: np.ndarray, resolution: float, walls: bool) -> np.ndarray:
     """Each cell centre's distance to the nearest occupied cell's centre, or to the boundary
     walls (a ring of cells just outside the grid) where the world has them; inf with neither."""
@@ -126,11 +169,10 @@ class Route:
     """The cost-to-go field of a scenario for its robot (see the module), and its readings."""
 
     def __init__(self, scenario: Scenario, goal_radius: float) -> None:
-        self.scenario = scenario
+        self.scenario = scenario  # what it was planned for (an env plans a fixed world's once)
         width = scenario.robot.width_across
-        self.resolution = resolution = min(0.05, width / CELLS_ACROSS)
-        self._grid = grid = scenario_grid(scenario, resolution, inflation=0.0)
-        self.origin = grid.origin
+        resolution = min(0.05, width / CELLS_ACROSS)
+        self.grid = grid = scenario_grid(scenario, resolution, inflation=0.0)  # where the field's cells lie
         self.goal = (float(scenario.goal[0]), float(scenario.goal[1]))
         self.goal_radius = float(goal_radius)
         clearance = _clearance(grid.occupied, resolution, scenario.world.walls)
@@ -147,37 +189,16 @@ class Route:
             inside = gap == gap.min()
         self.field = _cost_to_go(cost, np.column_stack([rows[inside], cols[inside]]), gap[inside], resolution)
 
-    def _cell(self, x: float, y: float) -> tuple[int, int]:
-        return self._grid.cell_of(x, y)
-
     def distance(self, x: float, y: float) -> float:
         """The cost-to-go from (x, y) (bilinear between the open cells around it); the straight
         distance to the goal where no open cell is near."""
-        u = (x - self.origin[0]) / self.resolution - 0.5
-        v = (y - self.origin[1]) / self.resolution - 0.5
-        rows, cols = self.field.shape
-        c0, r0 = int(math.floor(u)), int(math.floor(v))
-        total = weight = 0.0
-        for r, wr in ((r0, 1.0 - (v - r0)), (r0 + 1, v - r0)):
-            for c, wc in ((c0, 1.0 - (u - c0)), (c0 + 1, u - c0)):
-                if 0 <= r < rows and 0 <= c < cols and math.isfinite(self.field[r, c]):
-                    total += wr * wc * self.field[r, c]
-                    weight += wr * wc
-        if weight > 1e-9:
-            return total / weight
-        row, col = self._cell(x, y)
-        ahead_x, ahead_y, found = _walk(self.field, row, col, self.origin[0], self.origin[1], self.resolution, 0.0,
-                                        self.goal[0], self.goal[1], self.goal_radius)
-        if found:
-            return float(self.field[self._cell(ahead_x, ahead_y)] + math.hypot(ahead_x - x, ahead_y - y))
-        return math.hypot(self.goal[0] - x, self.goal[1] - y)
+        return _cost_at(self.field, *self.grid.origin, self.grid.resolution, x, y, *self.goal)
 
     def ahead(self, x: float, y: float, lookahead: float) -> tuple[float, float]:
         """The point ``lookahead`` metres down the route from (x, y) (the goal once nearer than that,
         and the goal where no route leaves (x, y))."""
-        row, col = self._cell(x, y)
-        ax, ay, found = _walk(self.field, row, col, self.origin[0], self.origin[1], self.resolution, lookahead,
-                              self.goal[0], self.goal[1], self.goal_radius)
+        ax, ay, found = _walk(self.field, *self.grid.origin, self.grid.resolution, x, y, lookahead, *self.goal,
+                              self.goal_radius)
         if not found or math.hypot(ax - self.goal[0], ay - self.goal[1]) <= self.goal_radius:
             return self.goal
         return ax, ay

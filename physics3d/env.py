@@ -10,6 +10,7 @@ from gymnasium import spaces
 from common.nav_env import NavigationEnv
 from common.observations import ObservationLayout
 from common.readings import Readings
+from common.route import Route
 from common.scenario import Scenario
 from physics3d.render import ChaseCamera, GuiOverlay
 from physics3d.world import World
@@ -33,7 +34,7 @@ class CameraLayout:
     def reads_route(self) -> bool:
         return self.state.reads_route
 
-    def follow(self, route) -> None:
+    def follow(self, route: Route) -> None:
         self.state.follow(route)
 
     def __call__(self, readings: Readings, goal: tuple[float, float]) -> dict[str, np.ndarray]:

@@ -74,8 +74,8 @@ def first_difference(policy_path: str | Path, scenario, seed: int, conditions: C
     touches something inside a step whose end pose, where IR-SIM checks, is clear), ``contact``
     (the worlds disagree on a contact otherwise), ``drift`` (the poses part by 1 mm before any
     contact differs: sensing or arithmetic), or ``none``."""
-    from common.kinematics import Pose2D
     from common.evaluation import start_agent
+    from common.kinematics import Pose2D
     from common.task import Task
     from common.tiers import make_world
 

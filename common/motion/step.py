@@ -542,7 +542,7 @@ def finish_step(F, I, params, goals, routes, objects, segments, outlines, irsim,
 
 
 @kernel
-def finish_packed(floats, float_layout, ints, int_layout, orca_velocity, inside, irsim, dt, advanced, mode,  # noqa: E741
+def finish_packed(floats, float_layout, ints, int_layout, orca_velocity, inside, irsim, dt, advanced, mode,
                   x, y, yaw, v, w, lateral, stopped) -> tuple[int, bool]:
     """:func:`finish_step` with its float64 and int64 arrays packed (:mod:`common.motion.packing`),
     the floats in the order F, params, goals, routes, objects, segments, outlines, neighbors,
