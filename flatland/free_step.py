@@ -18,8 +18,10 @@ from numba.extending import register_jitable
 from common.geometry import sensor_origin
 from common.kernel_cache import compiled_for, kernel
 from common.kinematics import Pose2D, body_velocity, unicycle_euler, unicycle_exact, wheel_speeds
+from common.motion.packing import view2
+from common.motion.step import PACKED_BOX_ROWS, PACKED_CIRCLE_ROWS, finish_packed
 from flatland.clearance import path_clear, swept_capsule
-from flatland.lidar import cast_scan
+from flatland.lidar import cast_scan, cast_scan_among
 
 
 def step_constants(*, step_time: float, exact: bool, sweep_radius: float, wheel_radius: float, wheel_base: float,
@@ -60,6 +62,29 @@ def free_step(x, y, yaw, odometry_x, odometry_y, odometry_yaw, v, w, constants, 
     return True
 
 
+@kernel
+def free_step_among(x, y, yaw, odometry_x, odometry_y, odometry_yaw, v, w, constants, circles, boxes, segments, solids,
+                    ranges, out, floats, float_layout, ints, int_layout, orca_velocity, inside, irsim, dt, advanced,
+                    mode, stopped) -> tuple[bool, int, bool]:
+    """:func:`free_step` among movers, whose step follows the robot's in the same call: if the move
+    is clear, the movers' step after it (:func:`~common.motion.step.finish_packed`, its packed
+    arguments as :attr:`~common.motion.movers.Movers.step_arguments` gives them) and the scan from
+    the new pose among the static shapes and the movers where they now are. Whether the move was
+    clear (if not, nothing is written), the first mover (table row) the robot touched or -1, and
+    whether a wanderer arrived. Three calls a step made one: a crowd's step spent a fifth of its
+    time handing arguments over and back."""
+    if not free_step(x, y, yaw, odometry_x, odometry_y, odometry_yaw, v, w, constants, circles, boxes, segments, solids,
+                     ranges[:0], out):
+        return False, -1, False
+    touched, wanders = finish_packed(floats, float_layout, ints, int_layout, orca_velocity, inside, irsim, dt, advanced,
+                                     mode, out[0], out[1], out[2], v, w, 0.0, stopped)
+    sensor_x, sensor_y = sensor_origin(out[0], out[1], out[2], constants[5], constants[6])
+    cast_scan_among(sensor_x, sensor_y, out[2] + constants[7], constants[8], circles, boxes, segments,
+                    view2(floats, float_layout, PACKED_CIRCLE_ROWS), view2(floats, float_layout, PACKED_BOX_ROWS),
+                    constants[9], ranges)
+    return True, touched, wanders
+
+
 @functools.cache
 def free_step_code() -> Callable:
     """:func:`free_step`'s machine code for the arrays a world hands it (every one float64 and
@@ -68,3 +93,14 @@ def free_step_code() -> Callable:
     table = np.empty((0, 4))
     return compiled_for(free_step, *(0.0,) * 8, np.empty(10), np.empty((0, 3)), np.empty((0, 6)), table, table,
                         np.empty(0), np.empty(8))
+
+
+@functools.cache
+def free_step_among_code() -> Callable:
+    """:func:`free_step_among`'s machine code for the arrays a world and its movers hand it (as
+    :func:`free_step_code` and :func:`common.motion.movers.finish_code`)."""
+    table, layout = np.empty((0, 4)), np.empty((0, 4), dtype=np.int64)
+    return compiled_for(free_step_among, *(0.0,) * 8, np.empty(10), np.empty((0, 3)), np.empty((0, 6)), table, table,
+                        np.empty(0), np.empty(8), np.empty(0), layout, np.empty(0, dtype=np.int64), layout,
+                        np.empty((0, 2), dtype=np.float32), np.empty((0, 0), dtype=np.bool_), False, 0.0, False, 0,
+                        False)

@@ -30,7 +30,7 @@ from common.geometry import box_corner_table
 from common.grid_maps import occupied_boxes, occupancy
 from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, SegmentObstacle, WorldSpec
 from flatland.clearance import path_clear, swept_capsule
-from flatland.free_step import free_step_code, step_constants
+from flatland.free_step import free_step_among_code, free_step_code, step_constants
 from flatland.lidar import Lidar
 
 GRAVITY = 9.81
@@ -116,6 +116,7 @@ class World:
             beam_step=self.lidar.beam_step, range_max=scenario.lidar.range_max)
         self._moved = np.empty(8)
         self._free_step_code = free_step_code() if self._compilable else None
+        self._free_step_among_code = free_step_among_code() if self._compilable else None
         self._halts = scenario.world.collision_mode != "unobstructed"
         self._kept_movers: dict[int, tuple[Scenario, Movers]] = {}
         self._use_movers(scenario)
@@ -299,7 +300,7 @@ class World:
     def step(self, *command: float) -> Readings:
         """Drive with ``command`` for one step, (v m/s, w rad/s) for a differential drive (others:
         :mod:`common.drive`), and return the new readings."""
-        ranges = None
+        ranges = touched = None  # the scan, and the mover touched, once the compiled step gives them
         movers = self.movers
         lateral = 0.0
         if self.stopped or self._static:
@@ -315,7 +316,10 @@ class World:
             if not self.actuator.idle:
                 v, w = self.actuator(v, w, self._dt)
             if self._compiled:
-                ranges = self._free_step(v, w, scan=movers is None)
+                if movers is None or not movers.compiled:
+                    ranges = self._free_step(v, w, scan=movers is None)
+                elif (among := self._free_step_among(v, w, movers)) is not None:
+                    ranges, touched = among
             if ranges is None:
                 self.pose, self._touching_static = self._move(self.pose, v, w, test_clear=not self._compiled)
             else:
@@ -335,30 +339,53 @@ class World:
             self.stopped = self._touching_static and self._halts
             self.readings = self._read(acceleration, self.lidar.scan(*self.pose) if ranges is None else ranges)
             return self.readings
-        touched = movers.finish(self.pose, v, w, self.stopped, self.mover_rng, lateral)
+        if touched is None:
+            touched = movers.finish(self.pose, v, w, self.stopped, self.mover_rng, lateral)
+            ranges = self.lidar.scan(*self.pose, *movers.visible())
         contact = None
         if self._touching_static:
             contact = Contact("static", -1, "robot")
         elif touched >= 0:
             contact = Contact("mover", touched, mover_fault(self.pose, self.velocity[0], movers.states().rows[touched]))
         self.stopped = contact is not None and self._halts
-        self.readings = self._read(acceleration, self.lidar.scan(*self.pose, *movers.visible()), contact)
+        self.readings = self._read(acceleration, ranges, contact)
         return self.readings
 
     def _free_step(self, v: float, w: float, scan: bool = True) -> np.ndarray | None:
         """The compiled step (:mod:`flatland.free_step`) if the move touches nothing: pose and
         odometry advanced, the new scan returned (empty without ``scan``). None, with nothing
         changed, if it may touch."""
-        lidar, odometry, moved = self.lidar, self.odometry, self._moved
+        lidar = self.lidar
         ranges = np.empty(lidar.spec.beams if scan else 0)
-        arguments = (*self.pose, *odometry.pose, v, w, self._constants, lidar.circles, lidar.boxes, lidar.segments,
-                     self._solids, ranges, moved)
-        if not self._free_step_code(*arguments):
+        if not self._free_step_code(*self._free_step_arguments(v, w, ranges)):
             return None
-        x, y, yaw, odometry_x, odometry_y, odometry_yaw, odometry.v, odometry.w = moved.tolist()
+        self._take_moved()
+        return lidar.finish(ranges) if scan else ranges
+
+    def _free_step_among(self, v: float, w: float, movers: Movers) -> tuple[np.ndarray, int] | None:
+        """:meth:`_free_step` with the movers' step after the robot's and the scan among them, in
+        one compiled call (:func:`flatland.free_step.free_step_among`): the scan and the first mover
+        touched (a row of its states, or -1). None, with nothing changed, if the move may touch."""
+        movers.begin(self.mover_rng)
+        ranges = np.empty(self.lidar.spec.beams)
+        clear, touched, wanders = self._free_step_among_code(*self._free_step_arguments(v, w, ranges),
+                                                             *movers.step_arguments, self.stopped)
+        if not clear:
+            return None
+        self._take_moved()
+        return self.lidar.finish(ranges), movers.settled(touched, wanders)
+
+    def _free_step_arguments(self, v: float, w: float, ranges: np.ndarray) -> tuple:
+        lidar = self.lidar
+        return (*self.pose, *self.odometry.pose, v, w, self._constants, lidar.circles, lidar.boxes, lidar.segments,
+                self._solids, ranges, self._moved)
+
+    def _take_moved(self) -> None:
+        """The pose, odometry pose and odometry velocity a clear compiled step wrote."""
+        odometry = self.odometry
+        x, y, yaw, odometry_x, odometry_y, odometry_yaw, odometry.v, odometry.w = self._moved.tolist()
         self.pose = Pose2D(x, y, yaw)
         odometry.pose = Pose2D(odometry_x, odometry_y, odometry_yaw)
-        return lidar.finish(ranges) if scan else ranges
 
     def _clip(self, v: float, w: float) -> tuple[float, float]:
         v_lo, v_hi, w_lo, w_hi = self._limits

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Callable
 
 import numpy as np
 import pytest
@@ -422,6 +423,10 @@ def assert_same_readings(first: list[Readings], second: list[Readings]) -> None:
         assert a.collided == b.collided
         assert a.time == b.time
         assert_array_equal(a.lidar, b.lidar)
+        assert a.contact == b.contact
+        assert (a.movers is None) == (b.movers is None)
+        if a.movers is not None:
+            assert_array_equal(a.movers.rows, b.movers.rows)
 
 
 def test_same_scenario_and_seed_give_identical_readings():
@@ -499,26 +504,31 @@ def _drive_through_crashes(world: World, commands: np.ndarray) -> list[Readings]
 
 
 def _drive_counting_compiled(world: World, commands: np.ndarray) -> tuple[list[Readings], int]:
-    """:func:`_drive_through_crashes`, and how many of its steps the compiled path took."""
+    """:func:`_drive_through_crashes`, and how many of its steps the compiled path took (the
+    robot's own, or with the movers' step after it)."""
     taken = 0
-    python_free_step = world._free_step
 
-    def counting(v: float, w: float, **options):
-        nonlocal taken
-        ranges = python_free_step(v, w, **options)
-        taken += ranges is not None
-        return ranges
+    def counting(step: Callable) -> Callable:
+        def counted(*arguments, **options):
+            nonlocal taken
+            result = step(*arguments, **options)
+            taken += result is not None
+            return result
+        return counted
 
-    world._free_step = counting
+    world._free_step, world._free_step_among = counting(world._free_step), counting(world._free_step_among)
     return _drive_through_crashes(world, commands), taken
 
 
-@pytest.mark.parametrize("variant", ["euler", "exact", "box_robot", "mounted_noisy_lidar"])
+@pytest.mark.parametrize("variant", ["euler", "exact", "box_robot", "mounted_noisy_lidar", "among_movers"])
 def test_the_compiled_step_drives_exactly_as_the_python_step(variant):
-    # flatland.free_step does a clear move in one kernel; it must give the Python path's bits.
+    # flatland.free_step does a clear move in one kernel (among movers, their step and the scan
+    # too); it must give the Python path's bits.
     from common.generators import generate
 
     scenario = generate("cluttered", 4)
+    if variant == "among_movers":  # people who walk into the robot: contacts with movers too
+        scenario = generate("crowd", 0, 1.0, reacting=False)
     if variant == "exact":
         scenario = scenario.model_copy(update={"world": scenario.world.model_copy(update={"integrator": "exact"})})
     elif variant == "box_robot":

@@ -59,6 +59,8 @@ def test_every_world_of_movers_packs_into_the_types_its_step_was_compiled_for():
     from common.kernel_cache import compiled_for
     from common.motion.movers import Movers, finish_code
     from common.motion.step import finish_packed
+    from flatland.free_step import free_step_among, free_step_among_code
+    from flatland.world import World
 
     in_python = []
     for scenario in _worlds():
@@ -66,4 +68,9 @@ def test_every_world_of_movers_packs_into_the_types_its_step_was_compiled_for():
         assert movers.count > 0
         assert compiled_for(finish_packed, *movers._packed, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False) is finish_code()
         in_python.append(movers._python)
+        # And flatland's step that makes the movers' inside its own call, with a world's arrays.
+        world = World(scenario)
+        ranges = np.empty(world.lidar.spec.beams)
+        arguments = (*world._free_step_arguments(0.0, 0.0, ranges), *world.movers.step_arguments, False)
+        assert compiled_for(free_step_among, *arguments) is free_step_among_code()
     assert in_python == [False] * 4 + [True]  # the rvo world steps its movers in Python first

@@ -22,8 +22,11 @@ from common.kernel_cache import compiled_for
 from common.motion.rvo import rvo_velocity
 from common.motion.packing import pack
 from common.motion.step import (
-    COLLISION_MODES, command, desired_velocity, draw_wanderers, finish_packed, gather, move, plan_step, prepare,
-    snapshot, sync_robot,
+    COLLISION_MODES, PACKED_BOX_ROWS, PACKED_BOXES, PACKED_CIRCLE_ROWS, PACKED_CIRCLES, PACKED_F, PACKED_GOALS, PACKED_I,
+    PACKED_MEMBERS, PACKED_MOVING, PACKED_NEIGHBORS, PACKED_OBJECTS, PACKED_OUTLINE, PACKED_OUTLINES, PACKED_PARAMS,
+    PACKED_RING_INDEX, PACKED_RINGS, PACKED_ROBOT, PACKED_ROUTES, PACKED_SEEN_BOXES, PACKED_SEEN_CIRCLES,
+    PACKED_SEGMENTS, PACKED_STATES, PACKED_WALLS, command, desired_velocity, draw_wanderers, finish_packed, gather,
+    move, plan_step, prepare, snapshot, sync_robot,
 )
 from common.motion.steering import world_to_diff, world_to_omni
 from common.motion.table import (
@@ -120,15 +123,23 @@ class Movers:
 
     def _pack(self, t: MoverTable) -> None:
         """Move the arrays the compiled step reads and writes into one float and one integer buffer
-        (:mod:`common.motion.packing`), every name here and in the table then a view of them, and
-        gather :func:`finish_packed`'s arguments but the robot's pose and command."""
-        floats, float_layout, views = pack([t.F, t.params, t.goals, t.routes, t.objects, t.segments, t.outlines,
-                                            self._neighbors, self._outline, self._robot, *self._contacts[:4],
-                                            self._states, self._circle_rows, self._box_rows], np.float64)
+        (:mod:`common.motion.packing`, at the ``PACKED_*`` positions of :mod:`common.motion.step`),
+        every name here and in the table then a view of them, and gather :func:`finish_packed`'s
+        arguments but the robot's pose and command."""
+        circles, boxes, walls, rings, ring_index = self._contacts
+        floats, float_layout, views = pack(in_packed_order({
+            PACKED_F: t.F, PACKED_PARAMS: t.params, PACKED_GOALS: t.goals, PACKED_ROUTES: t.routes,
+            PACKED_OBJECTS: t.objects, PACKED_SEGMENTS: t.segments, PACKED_OUTLINES: t.outlines,
+            PACKED_NEIGHBORS: self._neighbors, PACKED_OUTLINE: self._outline, PACKED_ROBOT: self._robot,
+            PACKED_CIRCLES: circles, PACKED_BOXES: boxes, PACKED_WALLS: walls, PACKED_RINGS: rings,
+            PACKED_STATES: self._states, PACKED_CIRCLE_ROWS: self._circle_rows, PACKED_BOX_ROWS: self._box_rows}),
+            np.float64)
         (t.F, t.params, t.goals, t.routes, t.objects, t.segments, t.outlines, self._neighbors, self._outline,
          self._robot, circles, boxes, walls, rings, self._states, self._circle_rows, self._box_rows) = views
-        ints, int_layout, views = pack([t.I, self._contacts[4], self._moving, self._circles, self._boxes,
-                                        self._members], np.int64)
+        ints, int_layout, views = pack(in_packed_order({
+            PACKED_I: t.I, PACKED_RING_INDEX: ring_index, PACKED_MOVING: self._moving,
+            PACKED_SEEN_CIRCLES: self._circles, PACKED_SEEN_BOXES: self._boxes, PACKED_MEMBERS: self._members}),
+            np.int64)
         t.I, ring_index, self._moving, self._circles, self._boxes, self._members = views
         self._contacts = (circles, boxes, walls, rings, ring_index)
         self._packed = (floats, float_layout, ints, int_layout, t.orca_velocity, self._inside, t.irsim, self._dt,
@@ -181,13 +192,34 @@ class Movers:
         omnidirectional robot; ``stopped``: it was halted when the step began); every mover steps (a wanderer's next goal drawn from ``rng``), is judged, and
         the groups plan the next step. The index (a row of :meth:`states`) of the first mover the
         robot touches, or -1."""
-        t = self.table
-        if self._wanderer_arrived:
-            draw_wanderers(t.F, t.I, t.goals, rng)
+        self.begin(rng)
         if self._python:
             self._advance_in_python(pose, v, w, lateral, stopped)
         x, y, yaw = pose
-        touched, self._wanderer_arrived = self._finish_step(*self._packed, x, y, yaw, v, w, lateral, stopped)
+        return self.settled(*self._finish_step(*self._packed, x, y, yaw, v, w, lateral, stopped))
+
+    @property
+    def compiled(self) -> bool:
+        """Whether a step is the one compiled call :meth:`step_arguments` feeds (no mover steps
+        in Python first, as IR-SIM's rvo does), which a tier may make inside a kernel of its own."""
+        return not self._python
+
+    def begin(self, rng: np.random.Generator) -> None:
+        """Start a step: every wanderer that arrived last step draws its next goal from ``rng``."""
+        if self._wanderer_arrived:
+            draw_wanderers(self.table.F, self.table.I, self.table.goals, rng)
+            self._wanderer_arrived = False
+
+    @property
+    def step_arguments(self) -> tuple:
+        """:func:`~common.motion.step.finish_packed`'s arguments before the robot's pose and
+        command, for a tier's kernel to pass on (after :meth:`begin`, then :meth:`settled`)."""
+        return self._packed
+
+    def settled(self, touched: int, wanders: bool) -> int:
+        """End a step with what the compiled step returned: the index (a row of :meth:`states`)
+        of the first mover the robot touched, or -1."""
+        self._wanderer_arrived = wanders
         return -1 if touched < 0 else int(np.searchsorted(self._moving, touched))
 
     def _advance_in_python(self, pose: tuple[float, float, float], v: float, w: float, lateral: float,
@@ -239,6 +271,13 @@ class Movers:
         length, half width), unobstructed ones left out (arrays the next step overwrites)."""
         return self._circle_rows, self._box_rows
 
+
+
+def in_packed_order(arrays: dict[int, np.ndarray]) -> list[np.ndarray]:
+    """The arrays keyed by their packed positions, in position order (every position once)."""
+    if sorted(arrays) != list(range(len(arrays))):
+        raise ValueError(f"packed positions {sorted(arrays)} are not 0 to {len(arrays) - 1} once each")
+    return [arrays[k] for k in range(len(arrays))]
 
 
 def _groups(I: np.ndarray, objects: int) -> tuple[np.ndarray, np.ndarray]:  # noqa: E741

@@ -26,7 +26,9 @@ from common.kernel_cache import kernel, uncounted
 from common.kinematics import unicycle_euler
 from common.motion.orca import orca_velocities
 from common.motion.packing import view1, view2, view3
-from common.motion.sfm import SOCIAL, VMAX, desire, pair_force, social_force_velocity, velocity_under
+from common.motion.sfm import (
+    NEIGHBOR_THRESHOLD, SOCIAL, VMAX, desire, pair_force, social_force_velocity, velocity_under,
+)
 from common.motion.steering import (
     desired_omni_velocity, diff_dash, omni_dash, omni_to_world, world_to_diff, world_to_omni, wrap_to_pi,
 )
@@ -183,27 +185,35 @@ def _plan_sfm(F, I, params, goals, objects, segments, members, inside, dt, neigh
     among the others (in order), then the objects outside the group it sees. A pair of members
     with the same parameters pushes each other equally and oppositely (:func:`pair_force`), so
     each such pair is computed once: the crowd's step costs half. Row a of ``neighbors`` (scratch
-    here) sums member a's pushes in member order, as the batched model sums them."""
+    here) sums member a's pushes in member order, as the batched model sums them; row k + a holds
+    member a's x, y, vx, vy, so that the pairs beyond every member's reach (most of a crowd's) are
+    passed over reading two adjacent rows, by :func:`pair_force`'s own first test."""
     k = members.shape[0]
+    reach = 0.0
     for a in range(k):
+        row = I[members[a], ROW]
         neighbors[a, 0] = neighbors[a, 1] = 0.0
+        neighbors[k + a, 0], neighbors[k + a, 1] = objects[row, OX], objects[row, OY]
+        neighbors[k + a, 2], neighbors[k + a, 3] = objects[row, OVX], objects[row, OVY]
+        reach = max(reach, params[members[a], NEIGHBOR_THRESHOLD])
+    beyond = reach * reach * (1.0 + 1e-6)  # as pair_force's test, for the largest reach: beyond everyone's
     alike = True  # whether every member pushes with the same parameters (a crowd's usual case)
     for a in range(1, k):
         alike = alike and _same_social(params[members[0]], params[members[a]])
     for a in range(k):
-        i, ri = members[a], I[members[a], ROW]
+        i = members[a]
+        x, y, vx, vy = neighbors[k + a, 0], neighbors[k + a, 1], neighbors[k + a, 2], neighbors[k + a, 3]
         for c in range(a + 1, k):
-            j, rj = members[c], I[members[c], ROW]
-            fx, fy, counts = pair_force(objects[ri, OX], objects[ri, OY], objects[ri, OVX], objects[ri, OVY],
-                                        objects[rj, OX], objects[rj, OY], objects[rj, OVX], objects[rj, OVY],
-                                        params[i], False)
+            ox, oy = neighbors[k + c, 0], neighbors[k + c, 1]
+            if (ox - x) * (ox - x) + (oy - y) * (oy - y) > beyond:
+                continue
+            j, ovx, ovy = members[c], neighbors[k + c, 2], neighbors[k + c, 3]
+            fx, fy, counts = pair_force(x, y, vx, vy, ox, oy, ovx, ovy, params[i], False)
             if counts:
                 neighbors[a, 0] += fx
                 neighbors[a, 1] += fy
             if not (alike or _same_social(params[i], params[j])):
-                fx, fy, counts = pair_force(objects[rj, OX], objects[rj, OY], objects[rj, OVX], objects[rj, OVY],
-                                            objects[ri, OX], objects[ri, OY], objects[ri, OVX], objects[ri, OVY],
-                                            params[j], False)
+                fx, fy, counts = pair_force(ox, oy, ovx, ovy, x, y, vx, vy, params[j], False)
                 fx, fy = -fx, -fy
             if counts:
                 neighbors[c, 0] -= fx
@@ -541,18 +551,26 @@ def finish_step(F, I, params, goals, routes, objects, segments, outlines, irsim,
     return touched, wanders
 
 
+# Where each array sits in the two buffers :class:`~common.motion.movers.Movers` packs
+# (:mod:`common.motion.packing`) and :func:`finish_packed` unpacks: one list of names for both.
+(PACKED_F, PACKED_PARAMS, PACKED_GOALS, PACKED_ROUTES, PACKED_OBJECTS, PACKED_SEGMENTS, PACKED_OUTLINES,
+ PACKED_NEIGHBORS, PACKED_OUTLINE, PACKED_ROBOT, PACKED_CIRCLES, PACKED_BOXES, PACKED_WALLS, PACKED_RINGS,
+ PACKED_STATES, PACKED_CIRCLE_ROWS, PACKED_BOX_ROWS) = range(17)
+PACKED_I, PACKED_RING_INDEX, PACKED_MOVING, PACKED_SEEN_CIRCLES, PACKED_SEEN_BOXES, PACKED_MEMBERS = range(6)
+
+
 @kernel
 def finish_packed(floats, float_layout, ints, int_layout, orca_velocity, inside, irsim, dt, advanced, mode,
                   x, y, yaw, v, w, lateral, stopped) -> tuple[int, bool]:
-    """:func:`finish_step` with its float64 and int64 arrays packed (:mod:`common.motion.packing`),
-    the floats in the order F, params, goals, routes, objects, segments, outlines, neighbors,
-    outline, robot, circles, boxes, walls, rings, states, circle_rows, box_rows, and the integers
-    I, ring_index, moving, seen_circles, seen_boxes, members (:class:`~common.motion.movers.Movers`
-    packs them so): one call hands over six arrays instead of twenty-five."""
+    """:func:`finish_step` with its float64 and int64 arrays packed (:mod:`common.motion.packing`)
+    at the ``PACKED_*`` positions: one call hands over six arrays instead of twenty-five."""
     f, fl, i, il = floats, float_layout, ints, int_layout
-    return finish_step(view2(f, fl, 0), view2(i, il, 0), view2(f, fl, 1), view3(f, fl, 2), view3(f, fl, 3),
-                       view2(f, fl, 4), view2(f, fl, 5), view3(f, fl, 6), irsim, dt, view2(f, fl, 7), view2(f, fl, 8),
-                       view1(f, fl, 9), x, y, yaw, v, w, lateral, stopped, advanced, mode, view2(f, fl, 10),
-                       view2(f, fl, 11), view2(f, fl, 12), view2(f, fl, 13), view2(i, il, 1), view1(i, il, 2),
-                       view1(i, il, 3), view1(i, il, 4), view2(f, fl, 14), view2(f, fl, 15), view2(f, fl, 16),
-                       orca_velocity, view2(i, il, 5), inside)
+    return finish_step(
+        view2(f, fl, PACKED_F), view2(i, il, PACKED_I), view2(f, fl, PACKED_PARAMS), view3(f, fl, PACKED_GOALS),
+        view3(f, fl, PACKED_ROUTES), view2(f, fl, PACKED_OBJECTS), view2(f, fl, PACKED_SEGMENTS),
+        view3(f, fl, PACKED_OUTLINES), irsim, dt, view2(f, fl, PACKED_NEIGHBORS), view2(f, fl, PACKED_OUTLINE),
+        view1(f, fl, PACKED_ROBOT), x, y, yaw, v, w, lateral, stopped, advanced, mode, view2(f, fl, PACKED_CIRCLES),
+        view2(f, fl, PACKED_BOXES), view2(f, fl, PACKED_WALLS), view2(f, fl, PACKED_RINGS),
+        view2(i, il, PACKED_RING_INDEX), view1(i, il, PACKED_MOVING), view1(i, il, PACKED_SEEN_CIRCLES),
+        view1(i, il, PACKED_SEEN_BOXES), view2(f, fl, PACKED_STATES), view2(f, fl, PACKED_CIRCLE_ROWS),
+        view2(f, fl, PACKED_BOX_ROWS), orca_velocity, view2(i, il, PACKED_MEMBERS), inside)
