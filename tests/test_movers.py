@@ -272,3 +272,30 @@ def test_a_project_file_moves_its_wanderers_as_its_scenario_does_in_any_world(tm
         return np.array([world.step(0.0, 0.0).movers.rows[0, :2] for _ in range(200)])
 
     assert np.array_equal(path_of(flatland.load_world(path, seed=3)), path_of(World(scenario, seed=3)))
+
+
+def test_a_crowds_social_force_sums_every_pair_within_reach_in_the_batched_order():
+    # The group's plan passes over pairs beyond reach before computing them: the sums must be
+    # those of every pair, each pushing both ways, in IR-SIM's batched order, to the bit.
+    from common.generators import generate
+    from common.motion.movers import Movers
+    from common.motion.sfm import NEIGHBOR_THRESHOLD, pair_force
+    from common.motion.table import OVX, OVY, OX, OY, ROW
+
+    movers = Movers(generate("crowd", 0, 1.0, "eval", reacting=True, behavior="sfm"))
+    movers.reset((1.0, 1.0, 0.0))
+    t = movers.table
+    members = movers._members[0]
+    states = [t.objects[t.I[m, ROW], [OX, OY, OVX, OVY]] for m in members]
+    reach = t.params[members[0], NEIGHBOR_THRESHOLD]
+    distances = [math.dist(a[:2], b[:2]) for k, a in enumerate(states) for b in states[k + 1:]]
+    assert sum(0.5 * reach < d <= reach for d in distances) >= 10 and sum(d > reach for d in distances) >= 10
+    for a, m in enumerate(members):
+        expected = np.zeros(2)
+        for c, other in enumerate(members):
+            if c != a:
+                first, second = (a, c) if a < c else (c, a)
+                fx, fy, counts = pair_force(*states[first], *states[second], t.params[members[first]], False)
+                if counts:
+                    expected += (fx, fy) if a < c else (-fx, -fy)
+        assert tuple(movers._neighbors[a, :2]) == tuple(expected), f"member {a}"
