@@ -116,7 +116,6 @@ class World:
             beam_step=self.lidar.beam_step, range_max=scenario.lidar.range_max)
         self._moved = np.empty(8)
         self._free_step_code = free_step_code() if self._compilable else None
-        self._free_step_among_code = free_step_among_code() if self._compilable else None
         self._halts = scenario.world.collision_mode != "unobstructed"
         self._kept_movers: dict[int, tuple[Scenario, Movers]] = {}
         self._use_movers(scenario)
@@ -316,10 +315,9 @@ class World:
             if not self.actuator.idle:
                 v, w = self.actuator(v, w, self._dt)
             if self._compiled:
-                if movers is None or not movers.compiled:
-                    ranges = self._free_step(v, w, scan=movers is None)
-                elif (among := self._free_step_among(v, w, movers)) is not None:
-                    ranges, touched = among
+                among = movers if movers is not None and movers.compiled else None
+                if (free := self._free_step(v, w, movers is None or among is not None, among)) is not None:
+                    ranges, touched = free
             if ranges is None:
                 self.pose, self._touching_static = self._move(self.pose, v, w, test_clear=not self._compiled)
             else:
@@ -351,41 +349,32 @@ class World:
         self.readings = self._read(acceleration, ranges, contact)
         return self.readings
 
-    def _free_step(self, v: float, w: float, scan: bool = True) -> np.ndarray | None:
+    def _free_step(self, v: float, w: float, scan: bool = True,
+                   movers: Movers | None = None) -> tuple[np.ndarray, int | None] | None:
         """The compiled step (:mod:`flatland.free_step`) if the move touches nothing: pose and
-        odometry advanced, the new scan returned (empty without ``scan``). None, with nothing
-        changed, if it may touch."""
-        lidar = self.lidar
+        odometry advanced; the new scan (empty without ``scan``) and, with ``movers`` (whose step
+        is compiled), the first of them the robot touched (a row of their states, or -1) after
+        their step, made in the same call and scanned among. None, with nothing changed, if the
+        move may touch."""
+        lidar, odometry, moved = self.lidar, self.odometry, self._moved
         ranges = np.empty(lidar.spec.beams if scan else 0)
-        if not self._free_step_code(*self._free_step_arguments(v, w, ranges)):
-            return None
-        self._take_moved()
-        return lidar.finish(ranges) if scan else ranges
-
-    def _free_step_among(self, v: float, w: float, movers: Movers) -> tuple[np.ndarray, int] | None:
-        """:meth:`_free_step` with the movers' step after the robot's and the scan among them, in
-        one compiled call (:func:`flatland.free_step.free_step_among`): the scan and the first mover
-        touched (a row of its states, or -1). None, with nothing changed, if the move may touch."""
-        movers.begin(self.mover_rng)
-        ranges = np.empty(self.lidar.spec.beams)
-        clear, touched, wanders = self._free_step_among_code(*self._free_step_arguments(v, w, ranges),
-                                                             *movers.step_arguments, self.stopped)
-        if not clear:
-            return None
-        self._take_moved()
-        return self.lidar.finish(ranges), movers.settled(touched, wanders)
-
-    def _free_step_arguments(self, v: float, w: float, ranges: np.ndarray) -> tuple:
-        lidar = self.lidar
-        return (*self.pose, *self.odometry.pose, v, w, self._constants, lidar.circles, lidar.boxes, lidar.segments,
-                self._solids, ranges, self._moved)
-
-    def _take_moved(self) -> None:
-        """The pose, odometry pose and odometry velocity a clear compiled step wrote."""
-        odometry = self.odometry
-        x, y, yaw, odometry_x, odometry_y, odometry_yaw, odometry.v, odometry.w = self._moved.tolist()
+        arguments = (*self.pose, *odometry.pose, v, w, self._constants, lidar.circles, lidar.boxes, lidar.segments,
+                     self._solids, ranges, moved)
+        touched = None
+        if movers is None:
+            if not self._free_step_code(*arguments):
+                return None
+        else:
+            movers.begin(self.mover_rng)
+            # Looked up here (cached), not when the world is built: a world without movers never loads it.
+            clear, row, wanders = free_step_among_code()(*arguments, *movers.step_arguments, self.stopped)
+            if not clear:
+                return None
+            touched = movers.settled(row, wanders)
+        x, y, yaw, odometry_x, odometry_y, odometry_yaw, odometry.v, odometry.w = moved.tolist()
         self.pose = Pose2D(x, y, yaw)
         odometry.pose = Pose2D(odometry_x, odometry_y, odometry_yaw)
+        return (lidar.finish(ranges) if scan else ranges), touched
 
     def _clip(self, v: float, w: float) -> tuple[float, float]:
         v_lo, v_hi, w_lo, w_hi = self._limits

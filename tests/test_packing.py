@@ -71,6 +71,8 @@ def test_every_world_of_movers_packs_into_the_types_its_step_was_compiled_for():
         # And flatland's step that makes the movers' inside its own call, with a world's arrays.
         world = World(scenario)
         ranges = np.empty(world.lidar.spec.beams)
-        arguments = (*world._free_step_arguments(0.0, 0.0, ranges), *world.movers.step_arguments, False)
+        arguments = (*world.pose, *world.odometry.pose, 0.0, 0.0, world._constants, world.lidar.circles,
+                     world.lidar.boxes, world.lidar.segments, world._solids, ranges, world._moved,
+                     *world.movers.step_arguments, False)
         assert compiled_for(free_step_among, *arguments) is free_step_among_code()
     assert in_python == [False] * 4 + [True]  # the rvo world steps its movers in Python first
