@@ -32,11 +32,13 @@ millisecond (``curriculum bench``'s ``reset_ms_*``).
 
 from __future__ import annotations
 
+import functools
 import math
+from typing import Callable
 
 import numpy as np
 
-from common.kernel_cache import kernel
+from common.kernel_cache import compiled_for, kernel
 from common.motion.spec import Dash, Motion, Orca, Sfm
 from common.scenario import BoxObstacle, CircleObstacle, Obstacle, Scenario, SegmentObstacle
 
@@ -226,6 +228,16 @@ def _crates(rng, inner: np.ndarray, count: int, boxes: np.ndarray, aisles: np.nd
     return crates[:placed]
 
 
+@functools.cache
+def _placement_codes() -> tuple[Callable, Callable]:
+    """:func:`_ends`'s and :func:`_crates`'s machine code for the arrays :func:`warehouse_moving`
+    hands them (float64, C-contiguous) and a Generator: called directly, a draw skips the
+    dispatcher's typing of its arguments (the Generator's is slow), about 4 redrawn layouts a scenario."""
+    rng, row, table = np.random.default_rng(0), np.empty(4), np.empty((0, 4))
+    return (compiled_for(_ends, rng, row, table, row, 0.0, 0.0, 0.0),
+            compiled_for(_crates, rng, row, 0, table, row, 0.0, np.empty((2, 2)), 0.0))
+
+
 def warehouse_moving(template: Scenario, rng: np.random.Generator, difficulty: float, reacting: bool | None = None,
                      behavior: str | None = None) -> tuple | None:
     """Shelving rows with aisles between them and a cross-aisle through them, forklifts patrolling
@@ -244,13 +256,14 @@ def warehouse_moving(template: Scenario, rng: np.random.Generator, difficulty: f
         for a, b in ((1.2, cross - 0.5 * gap), (cross + 0.5 * gap, width - 1.2)):
             if b - a > 0.6:
                 boxes.append((0.5 * (a + b), y, 0.5 * (b - a), 0.3, 1.8))
-    table = np.array(boxes)
+    table = np.array([box[:4] for box in boxes])
     inner = np.array([MARGIN, MARGIN, width - MARGIN, height - MARGIN])
-    ends = _ends(rng, inner, table[:, :4], aisles, cross, 5.0, template.robot.bounding_radius + 0.3)
+    placing_ends, placing_crates = _placement_codes()
+    ends = placing_ends(rng, inner, table, aisles, cross, 5.0, template.robot.bounding_radius + 0.3)
     if len(ends) < 2:
         return None
-    crates = _crates(rng, inner, int(rng.integers(3, 7)), table[:, :4], aisles, cross, ends,
-                     2.0 * template.robot.bounding_radius + 0.05)
+    crates = placing_crates(rng, inner, int(rng.integers(3, 7)), table, aisles, cross, ends,
+                            2.0 * template.robot.bounding_radius + 0.05)
     frame = _Frame(world, flip)
     statics = [frame.box(x, y, 2 * hx, 2 * hy, h) for x, y, hx, hy, h in boxes]
     statics += [frame.box(x, y, 2 * hx, 2 * hy, 0.6) for x, y, hx, hy in crates]
@@ -293,10 +306,13 @@ def _stretch(rng: np.random.Generator, low: float, high: float, shortest: float,
              at) -> tuple[float, float] | None:
     """A stretch [a, b] of a path (``at(t)``: its point at t in [low, high]), at least ``shortest``
     long, whose start is ``CLEAR_OF_ROBOT`` from the robot's start and goal; None if 20 draws miss."""
+    points = ends.tolist()
     for _ in range(20):
         a = float(rng.uniform(low, high - shortest))
         b = float(rng.uniform(a + shortest, high))
-        if np.hypot(*(ends - at(a)).T).min() >= CLEAR_OF_ROBOT:
+        x, y = at(a)
+        # Plain floats: NumPy's arithmetic on two points took a tenth of a scenario's draw.
+        if min(math.hypot(px - x, py - y) for px, py in points) >= CLEAR_OF_ROBOT:
             return a, b
     return None
 
