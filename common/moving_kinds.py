@@ -256,7 +256,8 @@ def warehouse_moving(template: Scenario, rng: np.random.Generator, difficulty: f
         for a, b in ((1.2, cross - 0.5 * gap), (cross + 0.5 * gap, width - 1.2)):
             if b - a > 0.6:
                 boxes.append((0.5 * (a + b), y, 0.5 * (b - a), 0.3, 1.8))
-    table = np.array([box[:4] for box in boxes])
+    # (0, 4) without rows: the placement code is compiled for two-dimensional tables only.
+    table = np.array([box[:4] for box in boxes], dtype=float).reshape(-1, 4)
     inner = np.array([MARGIN, MARGIN, width - MARGIN, height - MARGIN])
     placing_ends, placing_crates = _placement_codes()
     ends = placing_ends(rng, inner, table, aisles, cross, 5.0, template.robot.bounding_radius + 0.3)

@@ -15,12 +15,20 @@ from scipy import ndimage
 
 from common.geometry import box_distance, circle_distance, segment_distance
 from common.grid_maps import occupied_boxes
-from common.kernel_cache import kernel
+from common.kernel_cache import kernel, uncounted
 from common.placement import BOX, CIRCLE, shape_bounds
 from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenario, WorldSpec
 
 if TYPE_CHECKING:  # a runtime import would tie the grid module to the controllers package
     from common.controllers.base import LidarGeometry
+
+
+@uncounted
+def clamped_cell(x: float, y: float, x0: float, y0: float, resolution: float, rows: int,
+                 cols: int) -> tuple[int, int]:
+    """The (row, col) of the cell containing (x, y) in a grid of ``rows`` x ``cols`` cells of
+    ``resolution`` whose corner is (x0, y0), clamped to the grid (compiled code calls it too)."""
+    return int(min(max((y - y0) / resolution, 0), rows - 1)), int(min(max((x - x0) / resolution, 0), cols - 1))
 
 
 @dataclass(frozen=True)
@@ -34,9 +42,7 @@ class OccupancyGrid:
     def cell_of(self, x: float, y: float) -> tuple[int, int]:
         """The (row, col) of the cell containing world point (x, y), clamped to the grid."""
         rows, cols = self.occupied.shape
-        col = int(min(max((x - self.origin[0]) / self.resolution, 0), cols - 1))
-        row = int(min(max((y - self.origin[1]) / self.resolution, 0), rows - 1))
-        return row, col
+        return clamped_cell(x, y, self.origin[0], self.origin[1], self.resolution, rows, cols)
 
     def centre_of(self, row: int, col: int) -> tuple[float, float]:
         """World coordinates of a cell's centre."""

@@ -25,7 +25,7 @@ import numpy as np
 from scipy import ndimage
 
 from common.kernel_cache import kernel
-from common.occupancy import scenario_grid
+from common.occupancy import clamped_cell, scenario_grid
 from common.planners.astar import heap_pop, heap_push
 from common.scenario import Scenario
 
@@ -78,13 +78,6 @@ def _cost_to_go(cost: np.ndarray, seeds: np.ndarray, seed_costs: np.ndarray, res
 
 
 @kernel
-def _cell(field: np.ndarray, x0: float, y0: float, resolution: float, x: float, y: float) -> tuple[int, int]:
-    """The (row, col) of the cell holding (x, y), clamped to the grid (``OccupancyGrid.cell_of``)."""
-    rows, cols = field.shape
-    return int(min(max((y - y0) / resolution, 0.0), rows - 1)), int(min(max((x - x0) / resolution, 0.0), cols - 1))
-
-
-@kernel
 def _open_near(field: np.ndarray, row: int, col: int) -> tuple[int, int, bool]:
     """(row, col) if its cost-to-go is finite, else the cell of least finite cost-to-go within two
     cells of it (the robot's centre a cell or two into a closed margin); and whether there is one."""
@@ -106,7 +99,7 @@ def _walk(field: np.ndarray, x0: float, y0: float, resolution: float, x: float, 
     metres of cells, stopping early at a cell within ``threshold`` of the goal; the centre of the
     cell it ends on, and whether there was an open cell to start from."""
     rows, cols = field.shape
-    row, col = _cell(field, x0, y0, resolution, x, y)
+    row, col = clamped_cell(x, y, x0, y0, resolution, field.shape[0], field.shape[1])
     row, col, found = _open_near(field, row, col)
     if not found:
         return gx, gy, False
@@ -146,7 +139,7 @@ def _cost_at(field: np.ndarray, x0: float, y0: float, resolution: float, x: floa
                 weight += wr * wc
     if weight > 1e-9:
         return total / weight
-    row, col = _cell(field, x0, y0, resolution, x, y)
+    row, col = clamped_cell(x, y, x0, y0, resolution, field.shape[0], field.shape[1])
     row, col, found = _open_near(field, row, col)
     if found:
         cx, cy = x0 + (col + 0.5) * resolution, y0 + (row + 0.5) * resolution

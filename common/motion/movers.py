@@ -3,7 +3,10 @@
 A tier builds :class:`Movers` from its scenario, starts each episode with :meth:`Movers.reset`
 (where the robot starts; the groups plan from that snapshot) and, each step, moves the robot
 itself, then calls :meth:`Movers.finish` with where it went: the movers step after it, as in
-IR-SIM, are judged, and the groups plan the next step. The movers' poses then go into the tier's sensors. Everything random
+IR-SIM, are judged, and the groups plan the next step. (A tier whose robot step is compiled may
+make the movers' step inside its own kernel instead: :meth:`Movers.begin`, the compiled
+:func:`~common.motion.step.finish_packed` on :attr:`Movers.step_arguments`, then
+:meth:`Movers.settled`, as flatland's clear steps do.) The movers' poses then go into the tier's sensors. Everything random
 (a wanderer's next goal) is drawn from the generator the tier passes, so a seed fixes the episode.
 """
 
