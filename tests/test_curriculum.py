@@ -393,9 +393,8 @@ def test_policy_zip_is_the_checkpoint_of_the_best_validation(tmp_path, monkeypat
 
 @pytest.mark.slow
 def test_a_transfer_curriculum_writes_its_evidence(tmp_path, capsys, monkeypatch):
-    from stable_baselines3.common.vec_env import SubprocVecEnv
-
     from common.curriculum import runner
+    from common.curriculum.vec_envs import PreloadedSubprocVecEnv
     from common.curriculum.policy_file import read_manifest
 
     # Both tiers' stages step their envs in subprocesses (the file asks so), where each tier must register.
@@ -403,7 +402,7 @@ def test_a_transfer_curriculum_writes_its_evidence(tmp_path, capsys, monkeypatch
     monkeypatch.setattr(runner, "vec_env_class", lambda name: classes.append(original(name)) or classes[-1])
     out = tmp_path / "transfer"
     assert main(["run", str(ROOT / "tests/data/tiny_transfer.yaml"), "--out", str(out), "--no-progress"]) == 0
-    assert classes and set(classes) == {SubprocVecEnv}
+    assert classes and set(classes) == {PreloadedSubprocVecEnv}
     assert "transfer over 2 seeds: zero-shot" in capsys.readouterr().out
     assert {p.name for p in (out / "evidence").iterdir()} == {"transfer-seed1000", "scratch-seed0", "scratch-seed1000"}
     state = json.loads((out / "state.json").read_text())

@@ -1,6 +1,8 @@
 """The stage's in-process VecEnv: DummyVecEnv's steps, without its deep copy of the infos."""
 
 import copy
+import subprocess
+import sys
 
 import numpy as np
 from stable_baselines3.common.env_util import make_vec_env
@@ -98,3 +100,31 @@ def test_a_camera_env_s_terminal_observation_is_a_dict_as_dummy_vec_env_s():
     assert all(np.array_equal(terminal[key], stock_terminal[key]) for key in terminal)
     ours.close()
     stock.close()
+
+
+def test_a_subprocess_stage_s_env_processes_start_with_flatland_already_imported(tmp_path):
+    # A fresh interpreter: a fork server an earlier test started keeps the imports it started with.
+    script = """
+import sys
+
+import gymnasium as gym
+
+from common.curriculum.policy import vec_env_class
+
+
+def probe():
+    env = gym.make("CartPole-v1")  # an env that imports nothing of this project
+    env.unwrapped.imported = "flatland.env" in sys.modules
+    return env
+
+
+if __name__ == "__main__":
+    venv = vec_env_class("subproc")([probe, probe])
+    print(venv.get_attr("imported"))
+    venv.close()
+"""
+    path = tmp_path / "probe.py"
+    path.write_text(script)
+    result = subprocess.run([sys.executable, str(path)], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "[True, True]"

@@ -267,12 +267,10 @@ def mean_action(policy) -> Callable[[torch.Tensor], torch.Tensor] | None:
 def vec_env_class(name: str):
     """The VecEnv class of a stage's ``vec_env``: ``dummy`` (the envs in this process,
     :class:`~common.curriculum.vec_envs.FreshInfoVecEnv`) or ``subproc`` (stable-baselines3's
-    SubprocVecEnv, a process per env)."""
-    from stable_baselines3.common.vec_env import SubprocVecEnv
+    SubprocVecEnv, a process per env, :class:`~common.curriculum.vec_envs.PreloadedSubprocVecEnv`)."""
+    from common.curriculum.vec_envs import FreshInfoVecEnv, PreloadedSubprocVecEnv
 
-    from common.curriculum.vec_envs import FreshInfoVecEnv
-
-    return {"dummy": FreshInfoVecEnv, "subproc": SubprocVecEnv}[name]
+    return {"dummy": FreshInfoVecEnv, "subproc": PreloadedSubprocVecEnv}[name]
 
 
 def observation_space(manifest: Manifest):

@@ -1,11 +1,14 @@
-"""The vectorised env a stage trains in when its envs share the learner's process."""
+"""The vectorised envs a stage trains in: its envs in the learner's process, or one process each."""
 
 from __future__ import annotations
 
 import copy
+import multiprocessing
+from typing import Callable
 
+import gymnasium as gym
 import numpy as np
-from stable_baselines3.common.vec_env import DummyVecEnv
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
 
 
@@ -31,3 +34,23 @@ class FreshInfoVecEnv(DummyVecEnv):
                 obs, self.reset_infos[index] = env.reset()
             self._save_obs(index, obs)
         return self._obs_from_buf(), np.copy(self.buf_rews), np.copy(self.buf_dones), list(self.buf_infos)
+
+
+# What the fork server imports once for every env process it forks: without them each process
+# imports torch (through stable-baselines3's Monitor) and flatland itself. Not physics3d: importing
+# pybullet prints a line on standard output, which `curriculum bench --json` keeps for its JSON.
+FORK_SERVER_PRELOAD = ("__main__", "stable_baselines3.common.env_util", "flatland.env")
+
+
+class PreloadedSubprocVecEnv(SubprocVecEnv):
+    """stable-baselines3's SubprocVecEnv (a process per env), its processes forked from a server
+    that has already imported the envs' modules, where the platform has a fork server.
+
+    The server starts with the first such vec env of a Python process, and keeps its imports for
+    the process's life: a later vec env's processes fork from it again."""
+
+    def __init__(self, env_fns: list[Callable[[], gym.Env]], start_method: str | None = None) -> None:
+        if start_method is None and "forkserver" in multiprocessing.get_all_start_methods():
+            multiprocessing.set_forkserver_preload(list(FORK_SERVER_PRELOAD))
+            start_method = "forkserver"
+        super().__init__(env_fns, start_method)
