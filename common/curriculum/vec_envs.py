@@ -37,8 +37,9 @@ class FreshInfoVecEnv(DummyVecEnv):
 
 
 # What the fork server imports once for every env process it forks: without them each process
-# imports torch (through stable-baselines3's Monitor) and flatland itself. Not physics3d: importing
-# pybullet prints a line on standard output, which `curriculum bench --json` keeps for its JSON.
+# imports torch (through stable-baselines3's Monitor) and flatland itself: 8 envs took 21-23 s to
+# start, 6-7 s with them (docs/benchmarks.md). Not physics3d: importing pybullet prints a line on
+# standard output, which `curriculum bench --json` keeps for its JSON.
 FORK_SERVER_PRELOAD = ("__main__", "stable_baselines3.common.env_util", "flatland.env")
 
 
