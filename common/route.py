@@ -99,7 +99,7 @@ def _walk(field: np.ndarray, x0: float, y0: float, resolution: float, x: float, 
     metres of cells, stopping early at a cell within ``threshold`` of the goal; the centre of the
     cell it ends on, and whether there was an open cell to start from."""
     rows, cols = field.shape
-    row, col = clamped_cell(x, y, x0, y0, resolution, field.shape[0], field.shape[1])
+    row, col = clamped_cell(x, y, x0, y0, resolution, rows, cols)
     row, col, found = _open_near(field, row, col)
     if not found:
         return gx, gy, False
@@ -139,7 +139,7 @@ def _cost_at(field: np.ndarray, x0: float, y0: float, resolution: float, x: floa
                 weight += wr * wc
     if weight > 1e-9:
         return total / weight
-    row, col = clamped_cell(x, y, x0, y0, resolution, field.shape[0], field.shape[1])
+    row, col = clamped_cell(x, y, x0, y0, resolution, rows, cols)
     row, col, found = _open_near(field, row, col)
     if found:
         cx, cy = x0 + (col + 0.5) * resolution, y0 + (row + 0.5) * resolution

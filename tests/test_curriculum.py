@@ -394,8 +394,8 @@ def test_policy_zip_is_the_checkpoint_of_the_best_validation(tmp_path, monkeypat
 @pytest.mark.slow
 def test_a_transfer_curriculum_writes_its_evidence(tmp_path, capsys, monkeypatch):
     from common.curriculum import runner
-    from common.curriculum.vec_envs import PreloadedSubprocVecEnv
     from common.curriculum.policy_file import read_manifest
+    from common.curriculum.vec_envs import PreloadedSubprocVecEnv
 
     # Both tiers' stages step their envs in subprocesses (the file asks so), where each tier must register.
     classes, original = [], runner.vec_env_class

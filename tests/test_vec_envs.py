@@ -1,4 +1,5 @@
-"""The stage's in-process VecEnv: DummyVecEnv's steps, without its deep copy of the infos."""
+"""The stage's VecEnvs: in process, DummyVecEnv's steps without its deep copy of the infos; in
+subprocesses, forked with the envs' modules already imported."""
 
 import copy
 import subprocess

@@ -266,8 +266,8 @@ def mean_action(policy) -> Callable[[torch.Tensor], torch.Tensor] | None:
 
 def vec_env_class(name: str):
     """The VecEnv class of a stage's ``vec_env``: ``dummy`` (the envs in this process,
-    :class:`~common.curriculum.vec_envs.FreshInfoVecEnv`) or ``subproc`` (stable-baselines3's
-    SubprocVecEnv, a process per env, :class:`~common.curriculum.vec_envs.PreloadedSubprocVecEnv`)."""
+    :class:`~common.curriculum.vec_envs.FreshInfoVecEnv`) or ``subproc`` (a process per env,
+    :class:`~common.curriculum.vec_envs.PreloadedSubprocVecEnv`)."""
     from common.curriculum.vec_envs import FreshInfoVecEnv, PreloadedSubprocVecEnv
 
     return {"dummy": FreshInfoVecEnv, "subproc": PreloadedSubprocVecEnv}[name]
