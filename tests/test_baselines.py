@@ -31,6 +31,7 @@ CEILINGS = {("trap", "potential_field"): 0.1, ("trap", "go_to_goal"): 0.1, ("clu
 SUITES = ["sparse", "cluttered", "trap"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("suite", SUITES)
 def test_controller_comparison_meets_its_floors(suite):
     agents = [make_controller(name) for name in CONTROLLERS]

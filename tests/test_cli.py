@@ -125,6 +125,7 @@ def test_cli_process_exits_2_without_traceback(tmp_path):
     assert "Traceback" not in result.stderr and len(result.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_bench_json_has_the_agreed_keys(capsys, monkeypatch, tmp_path):
     monkeypatch.delenv("SB3_LOGDIR", raising=False)
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
@@ -349,6 +350,7 @@ def test_every_bad_argument_names_its_flag(argv, expected, capsys):
     assert code == 2 and err.count("\n") == 1 and expected in err, err
 
 
+@pytest.mark.slow
 def test_render_drives_a_policy_and_compare_writes_a_gif_per_agent(untrained_policy, tmp_path, capsys):
     gif = tmp_path / "policy.gif"
     assert main(["render", "--suite", "open", "--agent", str(untrained_policy), "--out", str(gif)]) == 0

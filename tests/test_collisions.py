@@ -518,6 +518,7 @@ def _drive_counting_compiled(world: World, commands: np.ndarray) -> tuple[list[R
     return _drive_through_crashes(world, commands), taken
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("variant", ["euler", "exact", "box_robot", "mounted_noisy_lidar", "among_movers"])
 def test_the_compiled_step_drives_exactly_as_the_python_step(variant):
     # flatland.free_step does a clear move in one kernel (among movers, their step and the scan

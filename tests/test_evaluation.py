@@ -101,6 +101,7 @@ def test_same_scenarios_for_every_agent_and_report_files(tmp_path):
     assert bar_chart(summaries, tmp_path / "c.png").stat().st_size > 1000
 
 
+@pytest.mark.slow
 def test_episodes_run_in_worker_processes_end_as_they_do_in_this_one():
     # Agents cross to the workers pickled (a policy as the recipe that opens its file) and every
     # episode builds its own world from its scenario and seed: the rows must match, in order.

@@ -174,6 +174,7 @@ def _assert_within_caps(slowest: list, rss_before: int) -> None:
     assert grown < MEGABYTES, f"the peak memory grew by {grown:.0f} MB"
 
 
+@pytest.mark.slow
 def test_mutated_policy_zips_load_or_are_refused_in_one_line(tmp_path):
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     seeds = [(str(p), p.read_bytes()) for p in sorted((ROOT / "curricula/policies").glob("*.zip"))]

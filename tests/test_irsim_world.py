@@ -116,6 +116,7 @@ def test_an_irsim_world_file_runs_in_irsim_through_the_cli(capsys, tmp_path):
     assert json.loads(capsys.readouterr().out)["dwa"]["episodes"] == 1
 
 
+@pytest.mark.slow
 def test_the_agreement_table_pairs_the_episodes_of_both_worlds(capsys):
     optional("irsim")
     from common.curriculum.irsim_agreement import _paired, main

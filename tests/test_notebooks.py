@@ -5,8 +5,8 @@ every link and image on it resolved.
 A lesson runs once per test session at most, through the site's own cache (docs/hooks/course.py):
 ``test_a_lesson_runs_and_says_what_it_printed`` executes it (or finds the execution of the same code
 on the same package sources in .cache/course/), and the site built afterwards shows those outputs
-without executing anything. The course tests form one pytest-xdist group (``--dist loadgroup`` in
-pyproject), so they run in this file's order on one worker: the lessons first, then the site.
+without executing anything. tests/conftest.py orders the session so that the site's tests run last,
+after every lesson test; a site built before its lessons (``-k site``) executes them itself.
 
 Quoting a figure: a lesson's prose that quotes a figure its code prints marks it with an HTML comment
 right after it that names the output line it comes from, ``16667<!--output steps_to_90-->``
@@ -31,7 +31,6 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
-COURSE = pytest.mark.xdist_group("course")
 
 
 def _course_module():
@@ -247,7 +246,6 @@ def test_a_figure_quoted_in_prose_must_be_in_the_outputs_next_to_it():
     assert len(misquoted(cells)) == 1
 
 
-@COURSE
 @pytest.mark.slow
 @pytest.mark.parametrize("notebook", NOTEBOOKS, ids=lambda p: p.stem)
 def test_a_lesson_runs_and_says_what_it_printed(notebook):
@@ -257,6 +255,16 @@ def test_a_lesson_runs_and_says_what_it_printed(notebook):
     cells = course.with_outputs(notebook, run)["cells"]
     assert all(c.get("execution_count") for c in cells if c["cell_type"] == "code" and c["source"].strip())
     assert misquoted(cells) == []
+
+
+def test_the_site_s_tests_are_the_session_s_last(request):
+    """tests/conftest.py's order: pytest-xdist hands them out last, so the build finds every lesson
+    executed rather than executing, or waiting for, lessons still running on another worker."""
+    items = request.session.items
+    site = [i for i, item in enumerate(items) if "site" in item.fixturenames]
+    if not site:
+        pytest.skip("the site's tests are deselected")
+    assert site == list(range(len(items) - len(site), len(items)))
 
 
 def test_the_course_quotes_figures():
@@ -322,20 +330,17 @@ def site(tmp_path_factory):
     return folder
 
 
-@COURSE
 @pytest.mark.slow
 def test_the_course_site_builds_with_strict_checks(site):
     assert (site / "course" / "00_first_drive" / "index.html").exists()
     assert "Kinematics and odometry" in (site / "index.html").read_text()
 
 
-@COURSE
 @pytest.mark.slow
 def test_every_link_and_image_on_the_site_resolves(site):
     assert broken_links(site) == []
 
 
-@COURSE
 @pytest.mark.slow
 @pytest.mark.parametrize("notebook", NOTEBOOKS, ids=lambda p: p.stem)
 def test_a_lesson_page_shows_its_outputs_and_no_stderr(site, notebook):
@@ -350,7 +355,6 @@ def test_a_lesson_page_shows_its_outputs_and_no_stderr(site, notebook):
     assert all(not c.get("outputs") for c in offered["cells"]), "the page offers the site's copy, not the lesson"
 
 
-@COURSE
 @pytest.mark.slow
 def test_the_first_lesson_animates_and_links_to_lesson_05(site):
     page = (site / "course" / "00_first_drive" / "index.html").read_text(encoding="utf-8")

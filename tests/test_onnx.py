@@ -79,6 +79,7 @@ def _episode_observations(agent, count: int) -> np.ndarray:
     return np.array(observations[:count], dtype=np.float32)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["stage1_2d_ppo", "stage1_2d_sac", "stage1_2d_td3", "normalised_ppo"])
 def test_the_onnx_actor_acts_as_the_policy_over_10000_observations_of_real_episodes(exported, name):
     import torch
@@ -163,6 +164,7 @@ def test_a_damaged_or_mismatched_onnx_file_is_refused_in_one_line(exported, tmp_
     assert "\n" not in str(error.value)
 
 
+@pytest.mark.slow
 def test_the_cli_exports_scores_the_onnx_file_as_the_zip_and_refuses_bad_input_with_exit_2(exported, tmp_path, capsys):
     from common.curriculum.cli import main
 

@@ -114,6 +114,7 @@ def _weights(model) -> torch.Tensor:
     return torch.cat([parameter.detach().flatten() for parameter in model.policy.parameters()])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("algorithm", [PPO, SAC])
 def test_training_with_the_runner_s_settings_gives_the_same_weights_to_the_bit(algorithm):
     def trained(runner_settings: bool) -> tuple[torch.Tensor, torch.Tensor]:

@@ -37,6 +37,7 @@ def test_the_aggregate_is_the_interquartile_mean_with_a_bootstrap_interval():
     assert aggregate([0.9])["ci95"] == [0.9, 0.9] and aggregate([])["iqm"] is None
 
 
+@pytest.mark.slow
 def test_an_unreachable_cluster_is_a_one_line_error_within_seconds(tmp_path):
     began = time.perf_counter()
     result = subprocess.run([sys.executable, "-m", "common.curriculum.cli", "sweep", str(TINY), "--address", "127.0.0.1:9",

@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv
 
@@ -103,6 +104,7 @@ def test_a_camera_env_s_terminal_observation_is_a_dict_as_dummy_vec_env_s():
     stock.close()
 
 
+@pytest.mark.slow
 def test_a_subprocess_stage_s_env_processes_start_with_flatland_already_imported(tmp_path):
     # A fresh interpreter: a fork server an earlier test started keeps the imports it started with.
     script = """
