@@ -212,7 +212,14 @@ def test_run_writes_every_artefact_and_resumes_after_kill(tmp_path, monkeypatch)
     assert any((whole / "stages/0-open/tensorboard").rglob("events.out.tfevents.*"))
     run = json.loads((whole / "run.json").read_text())
     assert run["package_version"] and "git_commit" in run and run["seed"] == 0
-    assert "| open | ppo | nav7 | 6,144 |" in (whole / "report.md").read_text()
+    # The machine, whose instructions decide how torch's kernels round: another trains other weights.
+    import torch
+
+    capability = torch.backends.cpu.get_cpu_capability()
+    assert run["machine"]["cpu"] and run["machine"]["cores"] == os.cpu_count() and run["machine"]["cpu_capability"] == capability
+    report = (whole / "report.md").read_text()
+    assert "| open | ppo | nav7 | 6,144 |" in report
+    assert f", on {run['machine']['cpu']} ({capability}, {os.cpu_count()} cores)" in report.splitlines()[2]
     from common.curriculum.policy_file import read_manifest
 
     manifest = read_manifest(whole / "stages/0-open/policy.zip")
