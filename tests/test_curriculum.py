@@ -224,6 +224,7 @@ def test_run_writes_every_artefact_and_resumes_after_kill(tmp_path, monkeypatch)
 
     manifest = read_manifest(whole / "stages/0-open/policy.zip")
     assert manifest["curriculum"] == "tiny" and manifest["observation"] == "nav7" and manifest["timesteps"] > 0
+    assert manifest["machine"] == run["machine"]  # the machine that saved it, here the one the run started on
     assert manifest["final_eval"]["draw"] == "test" and manifest["final_eval"]["episodes"] == 6
     from common.curriculum.policy_file import PolicyFile
     from common.generators import get_suite

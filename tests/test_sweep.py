@@ -16,6 +16,7 @@ import pytest
 from scipy import stats
 
 from common.curriculum.cli import main
+from common.curriculum.machine import describe, machine
 from common.statistics import aggregate
 
 pytest.importorskip("ray")
@@ -46,6 +47,24 @@ def test_an_unreachable_cluster_is_a_one_line_error_within_seconds(tmp_path):
     assert len(result.stderr.strip().splitlines()) == 1 and time.perf_counter() - began < 30
 
 
+def test_a_sweep_over_machines_says_which_seeds_ran_where(tmp_path):
+    """A cluster's nodes may differ, and a seed trains other weights on another CPU."""
+    from types import SimpleNamespace
+
+    from common.curriculum.sweep_report import write_results
+
+    final = {"success_rate": 0.9, "spl": 0.8}
+    grid = [SimpleNamespace(config={"seed": seed}, error=None,
+                            metrics={"done": True, "final": final, "machine": on, "run_dir": None})
+            for seed, on in ((0, "A (AVX2, 2 cores)"), (1000, "B (AVX512, 8 cores)"), (2000, "A (AVX2, 2 cores)"))]
+    results = write_results(tmp_path, grid, "success_rate", None, 2, 1.0, searched=False)
+    assert [t["machine"] for t in results["trials"]] == ["A (AVX2, 2 cores)", "B (AVX512, 8 cores)", "A (AVX2, 2 cores)"]
+    report = (tmp_path / "sweep.md").read_text()
+    assert "**The trials ran on 2 kinds of machine**" in report
+    assert "- A (AVX2, 2 cores): seeds 0, 2000\n- B (AVX512, 8 cores): seeds 1000\n" in report
+    assert "Every trial ran on" not in report
+
+
 def _trials(out: Path) -> list[dict]:
     return json.loads((out / "sweep.json").read_text())["trials"]
 
@@ -62,6 +81,8 @@ def test_a_seed_sweep_runs_each_seed_as_an_ordinary_run_and_aggregates(tmp_path,
         assert (run / "report.md").exists() and json.loads((run / "run.json").read_text())["seed"] == trial["seed"]
     results = json.loads((out / "sweep.json").read_text())
     assert results["backend"] == "ray" and results["aggregate"]["success_rate"]["n"] == 2
+    here = describe(machine())
+    assert [t["machine"] for t in trials] == [here, here] and f"Every trial ran on {here}." in (out / "sweep.md").read_text()
     assert (out / "sweep.png").stat().st_size > 1000 and "| metric |" in (out / "sweep.md").read_text()
     # A sweep directory is not reused by accident.
     assert main(["sweep", str(TINY), "--seeds", "2", "--out", str(out)]) == 2

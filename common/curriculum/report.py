@@ -9,6 +9,7 @@ from pathlib import Path
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from common.curriculum.machine import describe
 from common.curriculum.schema import CurriculumConfig
 
 
@@ -36,20 +37,13 @@ def learning_curve(eval_csv: Path, path: Path) -> Path:
     return path
 
 
-def _on_machine(machine: object) -> str:
-    """", on CPU (instructions, N cores)" from run.json's machine; nothing for a run that predates it."""
-    if not isinstance(machine, dict) or not machine.get("cpu"):
-        return ""
-    return f", on {machine['cpu']} ({machine.get('cpu_capability') or 'unknown instructions'}, {machine.get('cores')} cores)"
-
-
 def write_report(out: Path, config: CurriculumConfig, state: dict) -> Path:
     """report.md: per stage, training figures and the final (test-draw) evaluation."""
     run = json.loads((out / "run.json").read_text())
     learning_curve(out / "eval.csv", out / "learning_curve.png")
     lines = [f"# {config.name}", "",
              f"seed {config.seed}, device {run['device']}, package {run['package_version']}, commit {run['git_commit']}"
-             + _on_machine(run.get("machine")), "",
+             + (f", on {on}" if (on := describe(run.get("machine"))) else ""), "",
              "| stage | algorithm | observation | timesteps | wall time s | training env steps/s | promoted | test success (95% CI) | collision | timeout | stuck | SPL | steps (successes) | episodes |",
              "|---|---|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|"]
     for index, stage in enumerate(config.stages):

@@ -25,6 +25,7 @@ from common.atomic import atomic_write
 from common.conditions import conditions_of
 from common.curriculum.comparison import write_csv
 from common.curriculum.hyperparams import resolve_hyperparams
+from common.curriculum.machine import machine
 from common.curriculum.policy import (DeterministicAction, algorithm_class, load_weights, use_optimizer_kernels,
                                       policy_class, vec_env_class)
 from common.curriculum.policy_file import Normalizer, update_manifest
@@ -63,25 +64,6 @@ def git_commit() -> str | None:
     except (OSError, subprocess.CalledProcessError):
         return None
     return f"{commit}-dirty" if dirty else commit
-
-
-def machine() -> dict[str, str | int | None]:
-    """The machine a run starts on: its CPU model, the vector instructions torch's CPU kernels use
-    and its cores. The same seed trains other weights where the instructions differ, as the
-    kernels then add in another order and round otherwise; the report names the machine so that
-    two runs' figures can be told apart."""
-    import os
-
-    import torch
-
-    model = None
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as info:  # Linux; a few kB
-            model = next((line.split(":", 1)[1].strip() for line in info if line.startswith("model name")), None)
-    except OSError:
-        pass
-    return {"cpu": model or platform.processor() or platform.machine() or None,
-            "cpu_capability": torch.backends.cpu.get_cpu_capability(), "cores": os.cpu_count()}
 
 
 def _make_env_kwargs(stage: StageSpec) -> dict:

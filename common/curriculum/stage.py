@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import common
 from common.conditions import conditions_of
+from common.curriculum.machine import machine
 from common.curriculum.schema import CurriculumConfig, StageSpec
 from common.generators import get_suite
 from common.task import judged_radius
@@ -41,12 +42,13 @@ def training_robot(stage: StageSpec) -> RobotProfile:
 
 def manifest_for(config: CurriculumConfig, commit: str | None, index: int, timesteps: int, wall_time: float,
                  evaluation: dict | None) -> dict:
-    """What a policy zip of stage ``index`` says about itself (``commit``: the code the run started from)."""
+    """What a policy zip of stage ``index`` says about itself (``commit``: the code the run started
+    from; ``machine``: the one that saved it, whose CPU decides how its training rounded)."""
     stage = config.stages[index]
     return {"algorithm": stage.algorithm, "observation": stage.observation,
             "goal_distance_scale": DEFAULT_GOAL_DISTANCE_SCALE, "action_mapping": stage.action_mapping,
             "max_steps": stage.max_steps, "env_kwargs": stage.env_kwargs, "tier": stage.world,
             "robot": training_robot(stage).model_dump(mode="json"), "curriculum": config.name, "stage": stage.name,
             "stage_index": index, "seed": config.seed + index, "git_commit": commit,
-            "package_version": common.__version__, "timesteps": timesteps, "wall_time_s": round(wall_time, 1),
-            "eval": evaluation}
+            "package_version": common.__version__, "machine": machine(), "timesteps": timesteps,
+            "wall_time_s": round(wall_time, 1), "eval": evaluation}

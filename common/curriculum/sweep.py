@@ -202,6 +202,7 @@ def run_trial(config: dict[str, Any]) -> None:
     import ray
     from ray import tune
 
+    from common.curriculum.machine import describe, machine
     from common.curriculum.runner import Runner
     from common.curriculum.schema import curriculum_from_mapping
 
@@ -210,17 +211,18 @@ def run_trial(config: dict[str, Any]) -> None:
     curriculum = curriculum_from_mapping(data, config["source"])
     run_dir = Path(config["sweep_dir"]) / "trials" / trial_name(config, tune.get_context().get_trial_id())
     node = ray.get_runtime_context().get_node_id()
+    on = describe(machine())  # a cluster's nodes may differ, and a seed trains other weights on another CPU
 
     def report(row: dict) -> None:
         tune.report({"success_rate": float(row["success_rate"]), "spl": float(row["spl"]), "stage": row["stage"],
-                     "timesteps": int(row["timesteps"]), "node": node, "run_dir": str(run_dir)})
+                     "timesteps": int(row["timesteps"]), "node": node, "machine": on, "run_dir": str(run_dir)})
 
     state = Runner(curriculum, run_dir, resume=(run_dir / "state.json").exists(), device=config.get("device"),
                    progress=False, on_evaluation=report).run()
     final = state["stages"][curriculum.stages[-1].name]["final"]
     tune.report({"success_rate": final["success_rate"], "spl": final["spl"], "stage": "final",
                  "timesteps": state["stages"][curriculum.stages[-1].name]["timesteps"], "node": node,
-                 "run_dir": str(run_dir), "final": final, "done": True})
+                 "machine": on, "run_dir": str(run_dir), "final": final, "done": True})
 
 
 # -- the sweep -----------------------------------------------------------------------------------

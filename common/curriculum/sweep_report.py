@@ -26,7 +26,8 @@ def _trial(result) -> dict[str, Any]:
     status = "done" if metrics.get("done") else ("error" if result.error else "stopped early")
     return {"name": trial_name(config, metrics.get("trial_id")), "seed": config["seed"],
             "params": config.get("params") or {}, "status": status, "final": metrics.get("final"),
-            "run_dir": metrics.get("run_dir"), "node": metrics.get("node"), "error": first_line(result.error)}
+            "run_dir": metrics.get("run_dir"), "node": metrics.get("node"), "machine": metrics.get("machine"),
+            "error": first_line(result.error)}
 
 
 def trial_name(config: dict[str, Any], trial_id: str | None = None) -> str:
@@ -101,6 +102,15 @@ def _markdown(results: dict[str, Any]) -> str:
     if failed:
         lines += [f"**{len(failed)} of {len(results['trials'])} trials failed**; the aggregate is over the others:", ""]
         lines += [f"- `{t['name']}`: {t['error']}" for t in failed] + [""]
+    machines = sorted({t["machine"] for t in results["trials"] if t.get("machine")})
+    if len(machines) == 1:
+        lines += [f"Every trial ran on {machines[0]}.", ""]
+    elif machines:
+        # A seed trains other weights on another CPU: the spread mixes machines with seeds.
+        lines += [f"**The trials ran on {len(machines)} kinds of machine**; a seed trains other weights on "
+                  "another CPU, so the spread below mixes machines with seeds:", ""]
+        lines += [f"- {m}: seeds {', '.join(str(t['seed']) for t in results['trials'] if t.get('machine') == m)}"
+                  for m in machines] + [""]
     lines += ["| seed | parameters | status | test success | test SPL | run directory |", "|---:|---|---|---:|---:|---|"]
     for t in results["trials"]:
         params = ", ".join(f"{k.split('.')[-1]}={v:.4g}" if isinstance(v, float) else f"{k.split('.')[-1]}={v}"
