@@ -56,17 +56,21 @@ import pytest  # noqa: E402
 
 
 def pytest_collection_modifyitems(config, items):
-    """Long tests (marked ``slow``) first and the course site's tests last, the rest in between in
-    file order. pytest-xdist hands tests to its workers in this order: long tests begun early end
-    before the short ones run out, rather than leaving one worker alone at the end; and when the
-    site is built, every lesson test has long finished and filled the cache the site reads
-    (tests/test_notebooks.py), so the build waits for no lesson still running on the other worker."""
+    """The files holding long tests (marked ``slow``) first and the course site's tests last, each
+    in file order. pytest-xdist hands tests to its workers in this order: long tests begun early
+    end before the short ones run out, rather than leaving one worker alone at the end; a file
+    kept whole sets its module fixtures up once; and when the site is built, every lesson test
+    has long finished and filled the cache the site reads (tests/test_notebooks.py), so the build
+    waits for no lesson still running on the other worker."""
+    slow_files = {item.path for item in items if item.get_closest_marker("slow")}
+
     def rank(item) -> int:
         if "site" in getattr(item, "fixturenames", ()):
             return 2
-        return 0 if item.get_closest_marker("slow") else 1
+        return 0 if item.path in slow_files else 1
 
     items.sort(key=rank)  # stable: file order within each rank
+
 
 IN_CI = os.environ.get("CI", "").lower() in ("1", "true", "yes")
 
