@@ -32,4 +32,8 @@ def describe(recorded: object) -> str | None:
     (a run that predates it, a damaged file)."""
     if not isinstance(recorded, dict) or not isinstance(recorded.get("cpu"), str):
         return None
-    return f"{recorded['cpu']} ({recorded.get('cpu_capability') or 'unknown instructions'}, {recorded.get('cores')} cores)"
+    cores = recorded.get("cores")
+    details = [str(recorded.get("cpu_capability") or "unknown instructions")]
+    if isinstance(cores, int) and not isinstance(cores, bool):
+        details.append(f"{cores} cores")
+    return f"{recorded['cpu']} ({', '.join(details)})"
