@@ -253,15 +253,19 @@ def _rrt_star(field: np.ndarray, occupied: np.ndarray, x0: float, y0: float, res
     first_child = np.full(size, -1, dtype=np.int64)
     next_sibling = np.full(size, -1, dtype=np.int64)
     stack = np.empty(size, dtype=np.int64)
-    # Nearest-neighbour queries through bins a step wide: a linear scan of every node per query
-    # would make the whole budget's cost quadratic in it.
-    head = np.full((int(math.ceil(height / step)), int(math.ceil(width / step))), -1, dtype=np.int64)
+    # Nearest-neighbour queries through bins: a linear scan of every node per query would make the
+    # whole budget's cost quadratic in it. A fifth of a step wide, as the informed samples crowd
+    # the ellipse: bins a step wide held dozens of nodes each there, and rrt_pursuit's episodes
+    # took twice as long (the neighbours found, and so the paths, are the same whatever the width).
+    # On a large map, wider: at most 16 bins a node, so the bins never outgrow the tree.
+    side = max(step / 5.0, math.sqrt(width * height / (16.0 * size)))
+    head = np.full((int(math.ceil(height / side)), int(math.ceil(width / side))), -1, dtype=np.int64)
     next_in_bin = np.empty(size, dtype=np.int64)
     near = np.empty(size, dtype=np.int64)
     near_d = np.empty(size)
     keys = np.empty(size)
     nodes[0] = start
-    _bin(head, next_in_bin, x0, y0, step, 0, start[0], start[1])
+    _bin(head, next_in_bin, x0, y0, side, 0, start[0], start[1])
     headings[0] = heading if turns else math.nan
     cost[0] = 0.0
     count = 1
@@ -291,7 +295,7 @@ def _rrt_star(field: np.ndarray, occupied: np.ndarray, x0: float, y0: float, res
         else:
             qx, qy = x0 + draws[i, 0] * width, y0 + draws[i, 1] * height
         # The goal's node is a leaf: nothing grows from it.
-        _nearest_k(nodes, head, next_in_bin, x0, y0, step, qx, qy, 1, target, near, near_d)
+        _nearest_k(nodes, head, next_in_bin, x0, y0, side, qx, qy, 1, target, near, near_d)
         best, d = near[0], near_d[0]
         if d == 0.0:
             continue
@@ -303,7 +307,7 @@ def _rrt_star(field: np.ndarray, occupied: np.ndarray, x0: float, y0: float, res
             continue
         # The k nearest nodes to the new one (the goal's node among them, to be rewired, never a parent).
         k = min(count, int(math.ceil(k_rrt * math.log(count + 1.0))))
-        found = _nearest_k(nodes, head, next_in_bin, x0, y0, step, nx, ny, k, -1, near, near_d)
+        found = _nearest_k(nodes, head, next_in_bin, x0, y0, side, nx, ny, k, -1, near, near_d)
         # Parent: the cheapest of them with a free edge to the new node; the nearest, checked above, if none.
         for m in range(found):
             keys[m] = math.inf if near[m] == target else cost[near[m]] + near_d[m]
@@ -327,7 +331,7 @@ def _rrt_star(field: np.ndarray, occupied: np.ndarray, x0: float, y0: float, res
         headings[new] = math.atan2(ny - nodes[chosen, 1], nx - nodes[chosen, 0]) if turns else math.nan
         cost[new] = chosen_cost
         _reparent(parent, first_child, next_sibling, new, chosen)
-        _bin(head, next_in_bin, x0, y0, step, new, nx, ny)
+        _bin(head, next_in_bin, x0, y0, side, new, nx, ny)
         if reaches_goal:
             target = new
             continue
@@ -359,7 +363,7 @@ def _rrt_star(field: np.ndarray, occupied: np.ndarray, x0: float, y0: float, res
             headings[target] = math.atan2(goal[1] - ny, goal[0] - nx) if turns else math.nan
             cost[target] = chosen_cost + math.hypot(goal[0] - nx, goal[1] - ny)
             _reparent(parent, first_child, next_sibling, target, new)
-            _bin(head, next_in_bin, x0, y0, step, target, goal[0], goal[1])
+            _bin(head, next_in_bin, x0, y0, side, target, goal[0], goal[1])
     if target < 0:
         return np.empty((0, 2))
     return _chain(nodes, parent, target)
