@@ -9,7 +9,8 @@ import pytest
 
 from common.controllers import make_controller
 from common.controllers.base import LidarGeometry
-from common.controllers.tracking import ScanTracker, blobs
+from common.controllers.dwa import clearances
+from common.controllers.tracking import Scene, ScanTracker, blobs
 from common.controllers.velocity_obstacle import nearest_admissible, orca_half_planes
 from common.evaluation import run_episode
 from common.generators import generate
@@ -88,6 +89,21 @@ def test_a_wall_driven_past_is_no_mover(drive):
         slid = max(slid, float(np.hypot(*tracker.tracks.velocity.T).max(initial=0.0)))
     # The filter did see fragments slide; only the evidence rule keeps them from being movers.
     assert slid > 0.5
+
+
+def test_dwa_clearances_are_each_arc_point_s_gap_to_the_nearest_return_and_predicted_mover():
+    rng = np.random.default_rng(3)
+    points, times = rng.uniform(-3.0, 3.0, (9, 12, 2)), 0.1 * np.arange(1, 13)
+    scene = Scene(static=rng.uniform(-4.0, 4.0, (360, 2)), centres=rng.uniform(-3.0, 3.0, (4, 2)),
+                  velocities=rng.uniform(-1.0, 1.0, (4, 2)), radii=rng.uniform(0.2, 0.4, 4))
+    static, movers = clearances(points, scene, times, 0.2)
+    # By hand, every point against every return, and every mover moved to the point's time.
+    to_returns = np.hypot(*(points[:, :, None, :] - scene.static).transpose(3, 0, 1, 2)).min(axis=2)
+    ahead = scene.centres[None] + times[:, None, None] * scene.velocities[None]  # (T, K, 2)
+    to_movers = (np.hypot(*(points[:, :, None, :] - ahead[None]).transpose(3, 0, 1, 2)) - scene.radii).min(axis=2)
+    assert np.array_equal(static, to_returns - 0.2) and np.array_equal(movers, to_movers - 0.2)
+    empty = Scene(np.empty((0, 2)), np.empty((0, 2)), np.empty((0, 2)), np.empty(0))
+    assert np.isinf(clearances(points, empty, times, 0.2)).all()
 
 
 def test_a_blob_that_vanishes_is_dropped_after_a_few_steps():
