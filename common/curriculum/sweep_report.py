@@ -106,7 +106,6 @@ def _markdown(results: dict[str, Any]) -> str:
     if len(machines) == 1:
         lines += [f"Every trial ran on {machines[0]}.", ""]
     elif machines:
-        # A seed trains other weights on another CPU: the spread mixes machines with seeds.
         lines += [f"**The trials ran on {len(machines)} kinds of machine**; a seed trains other weights on "
                   "another CPU, so the spread below mixes machines with seeds:", ""]
         lines += [f"- {m}: seeds {', '.join(str(t['seed']) for t in results['trials'] if t.get('machine') == m)}"
