@@ -64,9 +64,11 @@ _ENV_IDS = {"flatland": "flatland/Nav-v0", "physics3d": "physics3d/WarehouseNav-
 
 
 @contextlib.contextmanager
-def _env_drive(tier: str, world: Scenario | str | Path, steps: int, seed: int = 0) -> Iterator[Callable[[range], Any]]:
+def _env_drive(tier: str, world: Scenario | str | Path, steps: int, seed: int = 0,
+               warmed: Callable[[Any], None] | None = None) -> Iterator[Callable[[range], Any]]:
     """A tier's env on ``world`` (lidar43, headless), warmed up and reset with ``seed``: a function
-    that drives it through steps k of ``steps`` random actions, resetting as episodes end."""
+    that drives it through steps k of ``steps`` random actions, resetting as episodes end.
+    ``warmed`` is called with the env after the warm-up, before that reset."""
     import gymnasium as gym
 
     importlib.import_module(tier)  # registers the env
@@ -75,6 +77,8 @@ def _env_drive(tier: str, world: Scenario | str | Path, steps: int, seed: int = 
         actions = _random_actions(steps, seed)
         env.reset(seed=seed)
         _drive(env, actions, range(min(200, steps)))  # warm-up: numba kernels compiled or loaded from cache
+        if warmed is not None:
+            warmed(env)
         env.reset(seed=seed)
         yield lambda indices: _drive(env, actions, indices)
     finally:
@@ -409,40 +413,70 @@ def physics3d_and_bare(scenario: Scenario, steps: int, chunk: int = 100, seed: i
     each timed by CPU: in separate runs of a few seconds one side strayed by a quarter on this
     noisy machine; taking turns, a slow minute falls on both alike.
 
-    The bare loop is the same physics with no env around it: per step, the wheel targets of the
-    same random actions, the world's sub-steps and one ``rayTestBatch`` of the lidar's beams; the
-    robot is put back at the start after the steps where the env reset, so both drive the same
-    episodes."""
+    The bare loop is the same physics with no env around it. Per step: the wheel targets the env
+    drove its robot at (the actions through its limits, delay and motor gain), the world's
+    sub-steps and one ``rayTestBatch`` of the lidar's beams. After each step where the env reset:
+    the start restored, with the friction and mass the env drew for the episode. So the bare
+    robot drives the env's episodes to the bit, contacts and all; a ``RuntimeError`` says if it
+    did not."""
     import pybullet as p
 
-    from common.kinematics import wheel_speeds
-    from physics3d.robot import MOTOR_FORCE, WHEEL_BASE, WHEEL_RADIUS, yaw_of
+    from physics3d.robot import yaw_of
     from physics3d.world import World
 
-    mapping = ActionMapping(scenario.robot)
-    targets = [wheel_speeds(*mapping.to_velocity(action), WHEEL_RADIUS, WHEEL_BASE)
-               for action in _random_actions(steps, seed)]  # the actions the env's drive takes
+    calls: list[tuple[str, tuple[float, ...]]] = []  # what the env did to its robot's dynamics, in order
+    envs: list[Any] = []
     resets: set[int] = set()  # the steps after which the env reset, for the bare loop to replay
 
-    with _env_drive("physics3d", scenario, steps, seed) as drive, contextlib.closing(World(scenario, seed=seed)) as world:
+    def record(env: Any) -> None:
+        envs.append(env)
+        _log_dynamics(env.unwrapped.world.robot, calls)
+
+    with _env_drive("physics3d", scenario, steps, seed, warmed=record) as drive, \
+            contextlib.closing(World(scenario, seed=seed)) as world:
         # Two PyBullet clients are open at once: neither outlives a failure.
         client, robot, substeps, rays = world.client, world.robot, world.substeps, world.lidar.rays
+        replayed = 0
+
+        def replay_to_drive() -> None:
+            """Apply the env's calls to the bare robot up to and including its next wheel targets."""
+            nonlocal replayed
+            while True:
+                name, args = calls[replayed]
+                replayed += 1
+                getattr(robot, name)(*args)
+                if name == "drive":
+                    return
 
         def bare(indices: range) -> None:
             for k in indices:
-                p.setJointMotorControlArray(robot.id, robot.wheels, p.VELOCITY_CONTROL, targetVelocities=targets[k],
-                                            forces=(MOTOR_FORCE, MOTOR_FORCE), physicsClientId=client)
+                replay_to_drive()
                 for _ in range(substeps):
                     p.stepSimulation(physicsClientId=client)
                 (x, y, z), orientation = p.getBasePositionAndOrientation(robot.id, physicsClientId=client)
                 p.rayTestBatch(*rays(x, y, z, yaw_of(orientation)), physicsClientId=client)
                 if k in resets:
                     world.reset()
+                    replay_to_drive()
 
+        replay_to_drive()  # the env's first episode: its draws and its robot at rest
         # Each round the env drives a chunk, then the bare loop replays it.
         env_rate, bare_rate = steps_per_s_taking_turns([lambda indices: resets.update(drive(indices)), bare],
                                                        [steps, steps], rounds=-(-steps // chunk))
+        if world.pose() != envs[0].unwrapped.world.pose():
+            raise RuntimeError("the bare PyBullet loop ended elsewhere than the env: it drove other episodes")
     return env_rate, bare_rate
+
+
+def _log_dynamics(robot: Any, calls: list[tuple[str, tuple[float, ...]]]) -> None:
+    """Make ``robot`` (a :class:`physics3d.robot.Robot`) append to ``calls`` each call that sets
+    its dynamics: its wheel targets, its tyres' friction, its mass."""
+    for name in ("drive", "set_friction", "set_mass_scale"):
+        def logged(*args: float, name: str = name, method: Callable[..., None] = getattr(robot, name)) -> None:
+            calls.append((name, args))
+            method(*args)
+
+        setattr(robot, name, logged)
 
 
 def camera_fps(scenario: Scenario, frames: int = 100) -> float:
