@@ -15,6 +15,12 @@ _MADE: list[str] = []  # the folders this session made, removed when it ends
 
 
 def pytest_configure(config):
+    # pytest-xdist's default scheduler hands each worker chunks of up to a quarter of the tests
+    # left, so the session's last tests (the course site's) reached one worker while lessons still
+    # waited in the other's chunk, and the site's build ran them itself. One test at a time keeps
+    # the order pytest_collection_modifyitems sets, and no worker sits on a queue of long tests.
+    if config.pluginmanager.hasplugin("xdist") and config.getoption("maxschedchunk") is None:
+        config.option.maxschedchunk = 1
     # The controller process makes the folder; pytest-xdist workers inherit the variable.
     if not hasattr(config, "workerinput"):
         _MADE.append(tempfile.mkdtemp(prefix="nav-tables-"))
@@ -61,7 +67,8 @@ def pytest_collection_modifyitems(config, items):
     end before the short ones run out, rather than leaving one worker alone at the end; a file
     kept whole sets its module fixtures up once; and when the site is built, every lesson test
     has long finished and filled the cache the site reads (tests/test_notebooks.py), so the build
-    waits for no lesson still running on the other worker."""
+    waits for no lesson still running on the other worker. (That holds as tests are handed out
+    one at a time: :func:`pytest_configure`.)"""
     slow_files = {item.path for item in items if item.get_closest_marker("slow")}
 
     def rank(item) -> int:

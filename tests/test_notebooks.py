@@ -265,6 +265,8 @@ def test_the_site_s_tests_are_the_session_s_last(request):
     if not site:
         pytest.skip("the site's tests are deselected")
     assert site == list(range(len(items) - len(site), len(items)))
+    # pytest-xdist keeps that order only when it hands out one test at a time.
+    assert request.config.getoption("maxschedchunk", 1) == 1
 
 
 def test_the_course_quotes_figures():
