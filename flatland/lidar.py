@@ -176,14 +176,24 @@ def cast_grid(ox, oy, a0, delta, occupied, x0, y0, cell_x, cell_y, out):
                 break
 
 
+_TABLES = np.empty((0, 3)), np.empty((0, 6)), np.empty((0, 4)), np.empty(1)  # circles, boxes, segments, ranges
+
+
 @functools.cache
-def _scan_codes() -> tuple[Callable, Callable]:
-    """:func:`cast_scan`'s and :func:`cast_scan_among`'s machine code for a lidar's tables (float64,
-    C-contiguous): called directly, a scan skips the dispatcher's matching of its arguments' types
-    (about 1.5% of a crowd's env step, in turns against the old path in one process)."""
-    circles, boxes, segments, ranges = np.empty((0, 3)), np.empty((0, 6)), np.empty((0, 4)), np.empty(1)
-    return (compiled_for(cast_scan, *(0.0,) * 4, circles, boxes, segments, 0.0, ranges),
-            compiled_for(cast_scan_among, *(0.0,) * 4, circles, boxes, segments, circles, boxes, 0.0, ranges))
+def _scan_code() -> Callable:
+    """:func:`cast_scan`'s machine code for a lidar's tables (float64, C-contiguous): called
+    directly, a scan skips the dispatcher's matching of its arguments' types (about 1.5% of a
+    crowd's env step, in turns against the old path in one process)."""
+    circles, boxes, segments, ranges = _TABLES
+    return compiled_for(cast_scan, *(0.0,) * 4, circles, boxes, segments, 0.0, ranges)
+
+
+@functools.cache
+def _scan_among_code() -> Callable:
+    """:func:`cast_scan_among`'s, likewise; compiled at a world's first scan among movers, not
+    before: from an empty cache it takes 6 s, a sixth of a static world's first build."""
+    circles, boxes, segments, ranges = _TABLES
+    return compiled_for(cast_scan_among, *(0.0,) * 4, circles, boxes, segments, circles, boxes, 0.0, ranges)
 
 
 def _table(rows, width: int) -> np.ndarray:
@@ -214,7 +224,7 @@ class Lidar:
         self.first_beam = float(angles[0]) + spec.offset[2]  # in the robot frame, mounting yaw included
         self.beam_step = float(angles[1] - angles[0]) if spec.beams > 1 else 0.0
         self._mount_x, self._mount_y = spec.offset[0], spec.offset[1]
-        self._scan_code, self._scan_among_code = _scan_codes()
+        self._scan_code = _scan_code()
         self._conformant: tuple[np.ndarray | None, np.ndarray | None] = (None, None)  # the movers' tables last scanned
 
     def place(self, circles: np.ndarray, boxes: np.ndarray, segments: np.ndarray) -> None:
@@ -237,8 +247,8 @@ class Lidar:
                             ranges)
         else:
             circles, boxes = self._movers_tables(circles, boxes)
-            self._scan_among_code(ox, oy, a0, self.beam_step, self.circles, self.boxes, self.segments, circles, boxes,
-                                  self.spec.range_max, ranges)
+            _scan_among_code()(ox, oy, a0, self.beam_step, self.circles, self.boxes, self.segments, circles, boxes,
+                               self.spec.range_max, ranges)
         if self.grid is not None:
             cast_grid(ox, oy, a0, self.beam_step, *self.grid, ranges)
         return self.finish(ranges)
