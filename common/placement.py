@@ -110,5 +110,9 @@ def place(kind: int, params: np.ndarray, low: np.ndarray, high: np.ndarray, ends
             continue
         if any_within(kinds[j], placed[j], points, clearance) or any_within(kind, params, outlines[j], clearance):
             return False
-    kinds[count], placed[count] = kind, params
+    kinds[count] = kind
+    # Element by element: a row assignment compiles numba's shape check and its error message,
+    # a second of a static world's first build from an empty cache.
+    for i in range(params.shape[0]):
+        placed[count, i] = params[i]
     return True
