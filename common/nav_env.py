@@ -106,7 +106,7 @@ class NavigationEnv(gym.Env):
         """Start an episode; ``options={"resample": True}`` redraws a random world file's layout
         (IR-SIM's ``reset(random=True)``) where a plain reset restores its initial state."""
         if self._closed:
-            raise gym.error.ClosedEnvironmentError("reset() on a closed env; make a new one")
+            self._refuse("reset")
         super().reset(seed=seed)
         if self._pending_rng is not None:
             self.np_random.bit_generator.state, self._pending_rng = self._pending_rng, None
@@ -136,8 +136,8 @@ class NavigationEnv(gym.Env):
         self._route_distance = route.distance(*self._readings.pose[:2])
 
     def step(self, action) -> tuple[np.ndarray, float, bool, bool, dict]:
-        if self._closed:
-            raise gym.error.ClosedEnvironmentError("step() on a closed env; make a new one")
+        if self._closed or self._readings is None:
+            self._refuse("step")
         command = self.actions.to_velocity(action)
         readings = self._readings = self.world.step(*command)
         # The reward's speed and turn: the command's for a differential drive, else its forward
@@ -167,8 +167,27 @@ class NavigationEnv(gym.Env):
             self.render()
         return self.layout(readings, self._goal), float(reward), terminated, truncated, info
 
+    def _refuse(self, call: str) -> None:
+        """Raise what ``call`` meets on an env that is closed or was never reset: without the
+        check a first step measured progress from nowhere (a reward near -100)."""
+        if self._closed:
+            raise gym.error.ClosedEnvironmentError(f"{call}() on a closed env; make a new one")
+        raise gym.error.ResetNeeded(f"{call}() before reset(); call reset() first")
+
+    def render(self) -> np.ndarray | None:
+        """The tier's frame (``rgb_array``) or window (``human``); None without a render mode or
+        before the first reset. Refused on a closed env, as ``step`` is."""
+        if self._closed:
+            self._refuse("render")
+        if self.render_mode is None or self._readings is None:
+            return None
+        return self._draw()
+
+    def _draw(self) -> np.ndarray | None:
+        raise NotImplementedError
+
     def close(self) -> None:
-        """Release the world; ``step`` and ``reset`` refuse after this, in both tiers alike."""
+        """Release the world; ``step``, ``reset`` and ``render`` refuse after this, in both tiers alike."""
         self._closed = True
         super().close()
 

@@ -201,7 +201,10 @@ def _encode(out, x, y, yaw, goal_x, goal_y, scale, v, w, yaw_rate, ranges, bound
 def make_layout(
     name: str, robot: RobotProfile, lidar: LidarSpec, goal_distance_scale: float = DEFAULT_GOAL_DISTANCE_SCALE
 ) -> ObservationLayout:
-    """Build the named layout for a robot and its lidar."""
+    """Build the named layout for a robot and its lidar (``goal_distance_scale``: the distance, in
+    metres, that the goal-distance entry reads as 1)."""
+    if not 0.0 < goal_distance_scale < math.inf:  # NaN fails too
+        raise ConfigError(None, "goal_distance_scale", f"{goal_distance_scale}; allowed: a finite distance > 0 (metres)")
     inv_v, inv_w, inv_r = 1.0 / robot.v_max, 1.0 / robot.w_max, 1.0 / lidar.range_max
     if name == "nav7":
         low = np.array([-1, -1, -1, -1, -1, 0, 0], dtype=np.float32)

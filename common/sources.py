@@ -113,6 +113,8 @@ def _kind_source(kind: str, difficulty: float, template: Scenario | None,
                  family: RobotFamily | None = None) -> GeneratorSource:
     if kind not in KINDS:
         raise ConfigError(None, "world", f"unknown scenario kind {quote(kind)}; allowed: {', '.join(KINDS)}")
+    if not 0.0 <= difficulty <= 1.0:  # NaN fails too; checked here as the warehouse's is replaced below
+        raise ConfigError(None, "difficulty", f"{difficulty} is outside [0, 1]")
     # The warehouse is defined by its 31 obstacles: it is always drawn at full difficulty.
     return GeneratorSource(kind, 1.0 if kind == "warehouse" else difficulty, template, family)
 

@@ -84,9 +84,7 @@ class NavEnv(NavigationEnv):
             return self.world
         return World(scenario, conditions=self.conditions)
 
-    def render(self) -> np.ndarray | None:
-        if self.render_mode is None or self.readings is None:
-            return None
+    def _draw(self) -> np.ndarray | None:
         if self._renderer is None:
             self._renderer = Renderer(self.scenario, human=self.render_mode == "human")
         self._renderer.draw(self.readings, self.trajectory)

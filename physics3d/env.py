@@ -134,9 +134,7 @@ class WarehouseNavEnv(NavigationEnv):
         camera = self.world.camera
         return CameraLayout(layout, camera.width, camera.height, camera.far)
 
-    def render(self) -> np.ndarray | None:
-        if self.render_mode is None or self.readings is None:
-            return None
+    def _draw(self) -> np.ndarray | None:
         if self.render_mode == "rgb_array":
             self._chase = self._chase or ChaseCamera(self.world)
             return self._chase.frame(self.readings)

@@ -125,9 +125,31 @@ def test_max_steps_is_a_positive_whole_number(max_steps):
 def test_a_closed_env_refuses_to_step_or_reset_in_both_tiers(env_id):
     import physics3d  # noqa: F401  (registers the 3D env)
 
-    env = gym.make(env_id, world="open")
+    env = gym.make(env_id, world="open", render_mode="rgb_array")
     env.reset(seed=0)
+    env.render()
     env.close()
-    for call in (lambda: env.step(env.action_space.sample()), lambda: env.reset(seed=1)):
+    for call in (lambda: env.step(env.action_space.sample()), lambda: env.reset(seed=1), env.render):
         with pytest.raises(gym.error.ClosedEnvironmentError, match="closed env"):
             call()
+
+
+@pytest.mark.parametrize("env_id", ["flatland/Nav-v0", "physics3d/WarehouseNav-v0"])
+def test_an_env_never_reset_refuses_to_step_in_both_tiers(env_id):
+    import physics3d  # noqa: F401  (registers the 3D env)
+
+    env = gym.make(env_id, world="open").unwrapped  # past gymnasium's own order check
+    with pytest.raises(gym.error.ResetNeeded, match=r"step\(\) before reset\(\)"):
+        env.step(env.action_space.sample())
+    env.reset(seed=0)
+    env.step(env.action_space.sample())
+    env.close()
+
+
+@pytest.mark.parametrize("argument, value", [("goal_distance_scale", 0.0), ("goal_distance_scale", -1.0),
+                                             ("goal_distance_scale", float("nan")), ("difficulty", 5.0),
+                                             ("difficulty", float("nan"))])
+@pytest.mark.parametrize("world", ["warehouse", "sparse"])
+def test_env_arguments_out_of_range_are_one_line_errors(world, argument, value):
+    with pytest.raises(ConfigError, match=f"^{argument}: "):
+        gym.make("flatland/Nav-v0", world=world, **{argument: value})
