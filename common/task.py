@@ -27,6 +27,7 @@ from common.scenario import MAX_LENGTH, Scenario
 OUTCOMES = ("success", "collision", "timeout", "stuck")
 DEFAULT_MAX_STEPS = 500
 MAX_STEPS = 1_000_000
+MAX_EPISODES = 1_000_000  # in one evaluation, from a file or the command line
 STUCK_WINDOW = 100  # steps
 STUCK_DISTANCE = 0.1  # m: an agent that moved less than this over the window is stuck
 

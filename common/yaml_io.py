@@ -87,6 +87,22 @@ class _BoundedLoader(yaml.composer.Composer, *((_Parser,) if _Parser else (yaml.
             raise _Refused(f"a value holds the control character #x{ord(control.group()):02x}", node.start_mark)
         return node
 
+    def construct_mapping(self, node, deep=False):
+        """A mapping; a key written twice in it is refused (PyYAML keeps the last one without a
+        word, so ``width: 10`` then ``width: 20`` was a 20 m world). Keys a merge (``<<``) brings
+        in may still be overridden, as YAML means them to be."""
+        if isinstance(node, yaml.MappingNode):
+            lines: dict[tuple[str, str], int] = {}
+            for key_node, _ in node.value:
+                if not isinstance(key_node, yaml.ScalarNode) or key_node.tag == "tag:yaml.org,2002:merge":
+                    continue
+                key, line = (key_node.tag, key_node.value), key_node.start_mark.line + 1
+                if key in lines:
+                    raise _Refused(f"the key {quote(key_node.value)} is given twice (lines {lines[key]} and {line})",
+                                   key_node.start_mark)
+                lines[key] = line
+        return super().construct_mapping(node, deep)
+
     def construct_object(self, node, deep=False):
         """A node's value; a scalar the safe loader cannot build (``2024-02-30``, an integer past
         Python's digit limit) is refused naming its line, not a ValueError from deep inside PyYAML."""

@@ -78,3 +78,18 @@ def test_text_the_reader_accepts_is_read_unchanged(tmp_path):
     path = tmp_path / "fine.yaml"
     path.write_text('name: "t\\tiny"\nnote: "caf\u00e9\\n"\nlines: |\n  one\r\n  two\n')
     assert read_yaml(path) == {"name": "t\tiny", "note": "caf\u00e9\n", "lines": "one\ntwo\n"}
+
+
+@pytest.mark.parametrize("text, key, lines", [
+    ("world: {width: 10, width: 20}\n", "width", "lines 1 and 1"),
+    ("name: stage1_2d\nseed: 0\nname: other\n", "name", "lines 1 and 3"),
+    ("stages:\n  - budget: 5\n    budget: 6\n", "budget", "lines 2 and 3"),
+])
+def test_a_key_given_twice_is_refused_naming_both_lines(text, key, lines):
+    with pytest.raises(ConfigError, match=f"^f.yaml: line \\d+: the key '{key}' is given twice \\({lines}\\)"):
+        parse_yaml(text, "f.yaml")
+
+
+def test_a_merge_may_still_be_overridden_and_lists_may_repeat_keys():
+    text = "base: &b {x: 1, y: 2}\nd:\n  <<: *b\n  x: 5\nitems: [{a: 1}, {a: 2}]\n"
+    assert parse_yaml(text) == {"base": {"x": 1, "y": 2}, "d": {"x": 5, "y": 2}, "items": [{"a": 1}, {"a": 2}]}

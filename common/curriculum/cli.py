@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Callable, Sequence
 import numpy as np
 
 from common.errors import ConfigError, ScenarioWarning
+from common.task import MAX_EPISODES
 
 if TYPE_CHECKING:
     from common.conditions import Conditions
@@ -433,7 +434,7 @@ def _add_scenario_source(parser: argparse.ArgumentParser, episodes: int | None) 
     source.add_argument("--scenario-file", metavar="FILE", help="a scenario or IR-SIM world YAML")
     parser.set_defaults(default_episodes=episodes)
     if episodes is not None:
-        parser.add_argument("--episodes", type=whole_number(1, 1_000_000),
+        parser.add_argument("--episodes", type=whole_number(1, MAX_EPISODES),
                             help=f"episodes (default: as many as a policy's own test figure, else {episodes})")
     parser.add_argument("--seed", type=whole_number(0, 2**32 - 1),
                         help="shifts the suite's base seed and the noise seeds, 0 to 2^32 - 1 (default: a "

@@ -29,10 +29,12 @@ stages:
 from __future__ import annotations
 
 import inspect
+import re
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator,
+                      model_validator)
 
 from common.actions import MAPPINGS
 from common.conditions import CONDITION_KEYS, ONLY_2D, ONLY_3D, Conditions, conditions_of
@@ -44,7 +46,7 @@ from common.generators import KINDS, SUITES
 from common.observations import LAYOUTS
 from common.rewards import resolve_reward_spec
 from common.scenario import pydantic_error
-from common.task import MAX_STEPS
+from common.task import MAX_EPISODES, MAX_STEPS
 from common.tiers import TIERS
 from common.yaml_io import read_yaml_mapping
 
@@ -54,11 +56,26 @@ class _Strict(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
 
+_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
+
+
+def _path_safe(name: str) -> str:
+    """A curriculum's or stage's name, which names directories of its run: never a path (a name
+    with ``/`` or ``..`` wrote a stage's policies outside the run directory)."""
+    if not _NAME.fullmatch(name):
+        raise ValueError(f"{quote(name)}; allowed: letters, digits, '_', '-' and '.', starting with a letter "
+                         "or digit, at most 64 characters")
+    return name
+
+
+Name = Annotated[str, AfterValidator(_path_safe)]
+
+
 class ScenarioSpec(_Strict):
     """Where a stage's training scenarios come from: exactly one of kind, mix, suite or file."""
 
     kind: Literal[KINDS] | None = None  # type: ignore[valid-type]
-    mix: dict[Literal[KINDS], Annotated[float, Field(gt=0.0)]] | None = None  # type: ignore[valid-type]
+    mix: dict[Literal[KINDS], Annotated[float, Field(gt=0.0, le=1e6)]] | None = None  # type: ignore[valid-type]
     difficulty: Annotated[float, Field(ge=0.0, le=1.0)] = 0.5
     suite: str | None = None
     file: str | None = None
@@ -85,9 +102,9 @@ class EvalSpec(_Strict):
     """Periodic evaluation on held-out scenarios (the suite's eval split, disjoint from training)."""
 
     suite: str
-    episodes: Annotated[int, Field(ge=1)] = 100
+    episodes: Annotated[int, Field(ge=1, le=MAX_EPISODES)] = 100
     every: Annotated[int, Field(ge=1)] = 50_000
-    final_episodes: Annotated[int, Field(ge=1)] | None = None  # the report's final evaluation (default: episodes)
+    final_episodes: Annotated[int, Field(ge=1, le=MAX_EPISODES)] | None = None  # the report's final evaluation (default: episodes)
 
     @field_validator("suite")
     @classmethod
@@ -106,7 +123,7 @@ class PromoteSpec(_Strict):
 class StageSpec(_Strict):
     """One stage of a curriculum."""
 
-    name: str
+    name: Name
     world: Literal[TIERS] = "flatland"  # type: ignore[valid-type]
     scenarios: ScenarioSpec
     observation: Literal[LAYOUTS] = "lidar43"  # type: ignore[valid-type]
@@ -137,7 +154,7 @@ class EvidenceSpec(_Strict):
 class CurriculumConfig(_Strict):
     """A curriculum: stages run in order, each optionally continuing from the previous policy."""
 
-    name: str
+    name: Name
     seed: Annotated[int, Field(ge=0, le=2**31 - 1)] = 0
     device: Literal["auto", "cpu", "cuda", "mps"] = "auto"
     stages: Annotated[list[StageSpec], Field(min_length=1)]
