@@ -16,6 +16,7 @@ map (the boundary of the union of occupied cells) shows.
 from __future__ import annotations
 
 import functools
+import io
 from pathlib import Path
 from typing import Annotated
 
@@ -24,8 +25,11 @@ from pydantic import Field, model_validator
 
 from common.errors import ConfigError, quote
 from common.fields import Frozen
+from common.files import read_bytes, regular_file
+from common.irsim_package import import_irsim
 
 MAX_CELLS = 4096 * 4096  # an image this many pixels is refused before it is decoded
+MAX_IMAGE_BYTES = 64 * 1024 * 1024
 OCCUPIED_ABOVE = 50.0  # IR-SIM's OCCUPANCY_THRESHOLD
 
 
@@ -48,13 +52,22 @@ class GridMap(Frozen):
 def _image_occupancy(path: str) -> np.ndarray:
     """IR-SIM's ImageGridGenerator: 0-100 occupancy, indexed [x, y] with y up."""
     import matplotlib.image as mpimg
-    from PIL import Image
+    from PIL import Image, UnidentifiedImageError
 
-    with Image.open(path) as image:  # the header only: a huge image is refused undecoded
-        if image.width * image.height > MAX_CELLS:
-            raise ConfigError(None, "world.obstacle_map", f"{image.width} x {image.height} pixels; allowed: at most "
-                              f"{MAX_CELLS:,} pixels")
-    grid = mpimg.imread(path)
+    # Read once, bounded, from a regular file only: PIL opening a FIFO waited for a writer forever.
+    data = read_bytes(path, MAX_IMAGE_BYTES, "an image file")
+    try:
+        with Image.open(io.BytesIO(data)) as image:  # the header only: a huge image is refused undecoded
+            width, height = image.size
+        if width * height <= MAX_CELLS:
+            grid = mpimg.imread(io.BytesIO(data), format=Path(path).suffix.lstrip(".") or None)
+    except (UnidentifiedImageError, Image.DecompressionBombError, OSError, ValueError) as exc:
+        # PIL refuses a header of more pixels than its own cap before ours can (a bomb).
+        why = str(exc).split(",")[0] if isinstance(exc, Image.DecompressionBombError) else "unreadable image data"
+        raise ConfigError(path, "world.obstacle_map", f"{why}; allowed: a PNG or another image of at most "
+                          f"{MAX_CELLS:,} pixels") from None
+    if width * height > MAX_CELLS:
+        raise ConfigError(path, "world.obstacle_map", f"{width} x {height} pixels; allowed: at most {MAX_CELLS:,} pixels")
     if grid.ndim > 2:
         grid = np.dot(grid[..., :3], [0.2989, 0.5870, 0.1140])
     if np.issubdtype(grid.dtype, np.integer):
@@ -198,12 +211,9 @@ def resolve_image(name: str, folder: Path | None) -> str:
     """An image path as IR-SIM finds it: as given, beside the world file, or among the maps IR-SIM
     ships (``cave.png``, ``hm3d_1.png``, ...) when it is installed."""
     for candidate in (Path(name), *(() if folder is None else (folder / name,))):
-        if candidate.is_file():
-            return str(candidate.resolve())
-    try:
-        import irsim
-    except ImportError:
-        irsim = None
+        if candidate.exists():  # a FIFO or a directory by that name is refused, not passed over
+            return str(regular_file(candidate, "an image file").resolve())
+    irsim = import_irsim()
     if irsim is not None:
         for found in sorted((Path(irsim.__file__).parent / "world" / "map").rglob(Path(name).name)):
             return str(found)

@@ -616,8 +616,8 @@ def scenario_from_mapping(data: dict, source: str | Path | None = None) -> Scena
             scenario = scenario.model_copy(update={"grid_map": grid})
         try:
             occupancy(grid, scenario.world.width, scenario.world.height)
-        except (ConfigError, OSError) as exc:
-            raise ConfigError(source, "grid_map", getattr(exc, "problem", None) or f"cannot read the map: {exc}") from None
+        except ConfigError as exc:  # the image's own file named, where the error is about it
+            raise ConfigError(source, "grid_map", f"{exc.source}: {exc.problem}" if exc.source else exc.problem) from None
     return scenario.check(source)
 
 

@@ -5,6 +5,9 @@ refused in one line where they cannot be built."""
 from __future__ import annotations
 
 import math
+import os
+import struct
+import zlib
 
 import numpy as np
 import pytest
@@ -69,7 +72,7 @@ def test_a_scenario_file_takes_a_map_image_beside_it(tmp_path):
     scenario = load_scenario(tmp_path / "scenario.yaml")
     assert occupancy(scenario.grid_map, 10.0, 10.0)[5].all()
     (tmp_path / "bad.yaml").write_text("grid_map: {image: gone.png}\n")
-    with pytest.raises(ConfigError, match=r"bad\.yaml: grid_map: cannot read the map"):
+    with pytest.raises(ConfigError, match=r"bad\.yaml: grid_map: \S*gone\.png: no such file"):
         load_scenario(tmp_path / "bad.yaml")
     (tmp_path / "both.yaml").write_text("grid_map: {}\n")
     with pytest.raises(ConfigError, match=r"both\.yaml: grid_map: a grid map comes from an image or a generator"):
@@ -119,6 +122,15 @@ def test_a_grid_map_is_seen_and_collided_with_as_irsim_does(obstacle_map, world,
     assert collided >= 0, "the drive never met the map: its contact was not compared"
 
 
+def _png_header(width: int, height: int) -> bytes:
+    """A tiny PNG file whose header claims ``width`` x ``height`` grey pixels (a decompression bomb's header)."""
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    header = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(b"\0\0")) + chunk(b"IEND", b"")
+
+
 def test_grid_maps_are_refused_in_one_line_where_they_cannot_be_read_or_built(tmp_path):
     from common.world_file import read_world_file
     from physics3d.world import World
@@ -128,6 +140,15 @@ def test_grid_maps_are_refused_in_one_line_where_they_cannot_be_read_or_built(tm
     huge = _image(tmp_path, np.zeros((4100, 4100)), "huge.png")
     with pytest.raises(ConfigError, match=r"world\.obstacle_map: 4100 x 4100 pixels; allowed: at most"):
         read_world_file(_world_file(tmp_path, huge))
+    for name, content, problem in (("junk.png", b"not an image", "unreadable image data"),
+                                   ("bomb.png", _png_header(60000, 60000), r"Image size \(3600000000 pixels\) exceeds limit of \d+ pixels")):
+        (tmp_path / name).write_bytes(content)
+        with pytest.raises(ConfigError, match=rf"world\.obstacle_map: {problem}; allowed: a PNG or another image"):
+            read_world_file(_world_file(tmp_path, str(tmp_path / name)))
+    # A FIFO is refused, not waited on for a writer (the test would hang).
+    os.mkfifo(tmp_path / "fifo.png")
+    with pytest.raises(ConfigError, match=r"a FIFO \(named pipe\), not a regular file; expected an image file"):
+        read_world_file(_world_file(tmp_path, str(tmp_path / "fifo.png")))
     with pytest.raises(ConfigError, match=r"world\.obstacle_map\.name: expected a string \(got 3\)"):
         read_world_file(_world_file(tmp_path, {"name": 3}))
     optional("irsim")  # its generators, and their own refusal

@@ -18,7 +18,7 @@ import numpy as np
 import yaml
 
 from common.actions import ActionMapping
-from common.curriculum.irsim_world import import_irsim
+from common.irsim_package import import_irsim
 from common.curriculum.stdout import stdout_to_stderr
 from common.errors import ConfigError
 from common.generators import SUITES

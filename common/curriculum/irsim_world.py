@@ -13,9 +13,6 @@ model (delays, wheel dynamics, odometry noise, the 3D knobs) are refused for thi
 
 from __future__ import annotations
 
-import contextlib
-import io
-import os
 import tempfile
 from pathlib import Path
 
@@ -27,22 +24,10 @@ from common.curriculum.stdout import stdout_to_stderr
 from common.errors import ConfigError
 from common.grid_maps import OWN_GENERATORS, GridMap, occupancy, write_occupancy_image
 from common.irsim_export import scenario_to_irsim
+from common.irsim_package import import_irsim
 from common.kinematics import Pose2D
 from common.readings import Imu, Odometry, Readings, frozen
 from common.scenario import Scenario
-
-
-def import_irsim():
-    """IR-SIM (headless: matplotlib's Agg backend), or None where it is not installed."""
-    os.environ.setdefault("MPLBACKEND", "Agg")
-    try:
-        # On import IR-SIM tries the GUI backends (TkAgg, Qt5Agg) whatever MPLBACKEND says, and prints
-        # a line for each that fails: noise on every headless run, kept from the user's output.
-        with contextlib.redirect_stdout(io.StringIO()):
-            import irsim
-    except ImportError:
-        return None
-    return irsim
 
 
 def _with_map_image(scenario: Scenario, folder: Path) -> Scenario:
