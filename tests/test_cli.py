@@ -498,3 +498,24 @@ def test_bench_reports_no_policy_figures_where_the_shipped_policies_are_not(monk
     figures = bench.onnx_figures(calls=10)
     assert figures and all(value is None for value in figures.values())
     assert {"agent_vs_torch_ppo", "onnx_vs_torch_sac", "torch_actions_per_s_sac"} <= figures.keys()
+
+
+RANDOM_WORLD = ("world: {width: 10, height: 10}\nrobot: {kinematics: {name: diff}, shape: {name: circle, radius: 0.2}, "
+                "state: [1, 1, 0], goal: [9, 9, 0]}\nobstacle:\n  - number: 6\n    distribution: {name: random, "
+                "range_low: [3, 3, 0], range_high: [7, 7, 0]}\n    shape: {name: circle, radius: 0.3}\n")
+
+
+@pytest.mark.parametrize("from_file", [False, True])
+def test_render_index_draws_that_scenario_alone(from_file, tmp_path):
+    """`render --index K` draws scenario K from its own seed: it was the last of K + 1 drawn (355 s
+    for K = 1,000,000)."""
+    import argparse
+
+    from common.curriculum.cli import _scenarios
+
+    (tmp_path / "random.yaml").write_text(RANDOM_WORLD)
+    source = {"suite": None, "scenario_file": str(tmp_path / "random.yaml")} if from_file else {"suite": "sparse", "scenario_file": None}
+    args = argparse.Namespace(seed=7, world="flatland", episodes=None, **source)
+    all_five = _scenarios(args, count=5)
+    assert [_scenarios(args, count=1, first=k)[0] for k in range(5)] == all_five
+    assert len({s.model_dump_json() for s in all_five}) == 5, "the five draws must differ for the test to tell them apart"

@@ -200,20 +200,22 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
-def _scenarios(args: argparse.Namespace, count: int | None = None, conditions=None):
-    """The scenarios an eval/compare/render run uses: a suite's, or a world file's (parsed once;
-    a file with random placements is drawn anew per episode, from seed S + i). A suite laid out
-    for its robot (``passages``) is drawn for the robot of ``conditions``."""
+def _scenarios(args: argparse.Namespace, count: int | None = None, conditions=None, first: int = 0):
+    """The scenarios an eval/compare/render run uses, from the ``first``: a suite's, or a world
+    file's (parsed once; a file with random placements is drawn anew per episode, from seed S + i).
+    Scenario i is drawn from its own seed alone, so the 1,000,000th costs what the first does. A
+    suite laid out for its robot (``passages``) is drawn for the robot of ``conditions``."""
     from common.generators import get_suite
     from common.world_file import WorldFile
 
     count = args.episodes if count is None else count
+    seed = args.seed + first
     if args.scenario_file:
         file = WorldFile(args.scenario_file)
-        scenarios = [file.scenario(args.seed + i) for i in range(count)]
+        scenarios = [file.scenario(seed + i) for i in range(count)]
     else:
         robot = conditions.for_tier(args.world, strict=False).profile if conditions is not None else None
-        scenarios = list(get_suite(args.suite).scenarios(count=count, seed=args.seed, robot=robot))
+        scenarios = list(get_suite(args.suite).scenarios(count=count, seed=seed, robot=robot))
     return scenarios
 
 
@@ -399,7 +401,7 @@ def _render(args: argparse.Namespace) -> int:
     agent = _agent(args.agent)
     _settle(args, [agent])
     radius, conditions = _judged(args, [agent]), _conditions(args, [agent])
-    scenario = _scenarios(args, count=args.index + 1, conditions=conditions)[args.index]
+    (scenario,) = _scenarios(args, count=1, conditions=conditions, first=args.index)
     _announce(args, agent.name, 1, radius, conditions)
     scenario = conditions.for_tier(args.world).scenario(scenario)  # the robot and the encoders that drive
     gif, episode, true_path, estimate = _record(agent, scenario, args, gif, radius, args.every)
