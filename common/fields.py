@@ -19,6 +19,8 @@ MAX_MOVER_SPEED = 10.0  # m/s and rad/s: people, forklifts and IR-SIM's agents m
 Coordinate = Annotated[float, Field(ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
 Point = tuple[Coordinate, Coordinate]
 Length = Annotated[float, Field(gt=0.0, le=MAX_LENGTH)]
+# A robot's own size: below a millimetre its outline's polygon had no area to check, and the env failed building it.
+BodyLength = Annotated[float, Field(ge=0.001, le=MAX_LENGTH)]
 NonNegativeLength = Annotated[float, Field(ge=0.0, le=MAX_LENGTH)]
 Angle = Annotated[float, Field(ge=-1000.0, le=1000.0)]  # rad: any finite heading a person would write
 Speed = Annotated[float, Field(ge=-MAX_SPEED, le=MAX_SPEED)]

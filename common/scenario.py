@@ -32,6 +32,7 @@ from common.fields import (  # noqa: F401  (re-exported: the scenario's caps and
     MAX_SPEED,
     Acceleration,
     Angle,
+    BodyLength,
     Coordinate,
     Fraction,
     Frozen,
@@ -225,9 +226,9 @@ class RobotProfile(Frozen):
     """
 
     shape: Literal["circle", "box", "polygon", "compound"] = "circle"
-    radius: Length = 0.2
-    length: Length = 0.3
-    width: Length = 0.2
+    radius: BodyLength = 0.2
+    length: BodyLength = 0.3
+    width: BodyLength = 0.2
     vertices: FootprintVertices | None = OMITTED_WHEN_ABSENT
     parts: Annotated[tuple[FootprintPart, ...], Field(min_length=1, max_length=MAX_PARTS)] | None = OMITTED_WHEN_ABSENT
     footprint_offset: Annotated[float, Field(ge=-MAX_LENGTH, le=MAX_LENGTH)] = omitted_at_default(0.0)

@@ -328,3 +328,15 @@ def test_a_copied_profile_outlines_its_own_footprint_not_the_original_s():
     assert robot.outline[0].radius == 0.2 and robot.width_across == pytest.approx(0.4)
     wider = robot.model_copy(update={"shape": "box", "length": 0.5, "width": 0.45})
     assert wider.outline[0].radius is None and wider.width_across == pytest.approx(0.45)
+
+
+@pytest.mark.parametrize("field", ["radius", "length", "width"])
+def test_a_robot_smaller_than_a_millimetre_is_refused_where_it_is_written(field, tmp_path):
+    """A 1e-7 m box passed validation, then the env failed building its outline (a raw pydantic error)."""
+    from common.scenario import load_scenario
+
+    shape = "circle" if field == "radius" else "box"
+    (tmp_path / "s.yaml").write_text(f"robot: {{shape: {shape}, {field}: 1.0e-7}}\nstart: [1, 1, 0]\ngoal: [9, 9]\n")
+    with pytest.raises(ConfigError, match=rf"s\.yaml: robot\.{field}: Input should be greater than or equal to 0\.001"):
+        load_scenario(tmp_path / "s.yaml")
+    RobotProfile(shape=shape, **{field: 0.001}).outline  # the smallest allowed is built
