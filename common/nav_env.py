@@ -20,6 +20,7 @@ from common.robots import footprint_reach
 from common.rewards import Reward, StepContext
 from common.route import Route
 from common.conditions import Conditions
+from common.errors import ConfigError
 from common.scenario import Scenario
 from common.sources import ScenarioSource
 from common.task import DEFAULT_MAX_STEPS, GoalThreshold, Task
@@ -89,7 +90,13 @@ class NavigationEnv(gym.Env):
         env's conditions (``self.scenario`` is the scenario as conditioned: robot, sensor noise)."""
         previous = None if self._drawn is None else self.scenario
         self._drawn = drawn
-        self.world = self._build_world(drawn)
+        try:
+            self.world = self._build_world(drawn)
+        except ConfigError as error:  # what a tier cannot build, named in the file the user wrote
+            file = getattr(self.source, "file", None)
+            if error.source is not None or file is None:
+                raise
+            raise error.with_source(file.path) from None
         self.scenario = scenario = self.world.scenario
         if previous is None or scenario.robot != previous.robot or scenario.lidar != previous.lidar:
             if previous is not None and scenario.robot.kinematics != previous.robot.kinematics:

@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import yaml
@@ -179,8 +180,6 @@ def test_a_car_turns_with_the_steering_angle_it_began_the_step_with():
 
 @pytest.mark.parametrize("kinematics, size", [("omni", 2), ("omni_angular", 3), ("acker", 2)])
 def test_the_env_takes_one_action_per_channel_of_the_robots_kinematics(kinematics, size):
-    import gymnasium as gym
-
     import flatland  # noqa: F401
 
     scenario = Scenario(robot=RobotProfile(kinematics=kinematics, v_min=-1.0), start=(2.0, 5.0, 0.0), goal=(8.0, 5.0))
@@ -213,6 +212,9 @@ def test_controllers_policies_curricula_and_the_3d_tier_refuse_another_drive_in_
         make_controller("potential_field").bind(omni, LidarSpec())
     with pytest.raises(ConfigError, match="robot.kinematics: the 3D robot is a differential drive, not 'omni'"):
         World(Scenario(robot=omni))
+    (tmp_path / "omni.yaml").write_text("robot: {kinematics: omni}\nstart: [1, 1, 0]\ngoal: [9, 9]\n")
+    with pytest.raises(ConfigError, match=r"^\S*omni\.yaml: robot\.kinematics: the 3D robot is a differential drive"):
+        gym.make("physics3d/WarehouseNav-v0", world=str(tmp_path / "omni.yaml"))  # the env names the user's file
     with pytest.raises(ConfigError, match="robot.motion_noise: IR-SIM's kinematic stand-in is not modelled"):
         World(Scenario(robot=RobotProfile(motion_noise=(0.1, 0, 0, 0.1))))
     compound = RobotProfile(shape="compound", parts=({"radius": 0.2}, {"center": (-0.2, 0.0), "radius": 0.15}))
