@@ -12,25 +12,37 @@ from common.scenario import Scenario, scenario_from_mapping
 from common.yaml_io import read_yaml_mapping
 
 _IRSIM_ONLY_KEYS = {"obstacle", "gui", "custom", "irsim"}
+# A project scenario's top-level keys that an IR-SIM world file does not have.
+_SCENARIO_ONLY_KEYS = {"start", "goal", "obstacles", "lidar", "goal_threshold", "grid_map", "robot_motion", "kind",
+                       "difficulty", "seed"}
 _IRSIM_ROBOT_KEYS = {"state", "sensors", "vel_max", "vel_min", "distribution", "number"}
 # Keys of IR-SIM's world section that a project scenario's world lacks (IR-SIM's empty world has no robot).
 _IRSIM_WORLD_KEYS = {"name", "sample_time", "step_mode", "control_mode", "obstacle_map", "mdownsample", "fog_map",
                      "fog_map_resolution", "gravity", "friction", "restitution", "drive_tau", "plot", "status"}
 
 
-def is_irsim(data: dict) -> bool:
-    """Whether a parsed YAML mapping is an IR-SIM world rather than a project scenario."""
-    if _IRSIM_ONLY_KEYS & data.keys():
-        return True
+def irsim_mark(data: dict) -> str | None:
+    """The field that marks a parsed YAML mapping as an IR-SIM world rather than a project
+    scenario (``obstacle``, ``world.gravity``, ``robot.state``, ...), or None."""
+    if found := sorted(_IRSIM_ONLY_KEYS & data.keys()):
+        return found[0]
     world = data.get("world")
-    if isinstance(world, dict) and _IRSIM_WORLD_KEYS & world.keys():
-        return True
+    if isinstance(world, dict) and (found := sorted(_IRSIM_WORLD_KEYS & world.keys())):
+        return f"world.{found[0]}"
     robot = data.get("robot")
     if isinstance(robot, list):
-        return True
+        return "robot"  # a list of robots
+    if not isinstance(robot, dict):
+        return None
     # A scenario's robot names its kinematics and shape; an IR-SIM robot maps them.
-    return isinstance(robot, dict) and (bool(_IRSIM_ROBOT_KEYS & robot.keys()) or isinstance(robot.get("shape"), dict)
-                                        or isinstance(robot.get("kinematics"), dict))
+    if found := sorted(_IRSIM_ROBOT_KEYS & robot.keys()):
+        return f"robot.{found[0]}"
+    return next((f"robot.{key}" for key in ("shape", "kinematics") if isinstance(robot.get(key), dict)), None)
+
+
+def is_irsim(data: dict) -> bool:
+    """Whether a parsed YAML mapping is an IR-SIM world rather than a project scenario."""
+    return irsim_mark(data) is not None
 
 
 class WorldFile:
@@ -51,7 +63,13 @@ class WorldFile:
         if "stages" in self.data:  # a curriculum's mark (common.curriculum.schema.is_curriculum)
             raise ConfigError(self.path, None, "is a curriculum (it has stages), not a scenario or an IR-SIM world file; "
                               "run it with: curriculum run FILE")
-        self.irsim = is_irsim(self.data)
+        mark = irsim_mark(self.data)
+        self.irsim = mark is not None
+        if self.irsim and (ours := sorted(_SCENARIO_ONLY_KEYS & self.data.keys())):
+            # Told apart by one key, a file mixing the formats was read as the wrong one: an IR-SIM
+            # key under world: made a scenario's start an unknown key, with no word of the cause.
+            raise ConfigError(self.path, ours[0], f"a project scenario's key, in a file that {mark} marks as an "
+                              "IR-SIM world; allowed: one format per file (docs/scenarios.md)")
         if self.irsim:
             from common.irsim_format import ReadCache, has_random_placement
 

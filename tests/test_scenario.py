@@ -340,3 +340,13 @@ def test_a_robot_smaller_than_a_millimetre_is_refused_where_it_is_written(field,
     with pytest.raises(ConfigError, match=rf"s\.yaml: robot\.{field}: Input should be greater than or equal to 0\.001"):
         load_scenario(tmp_path / "s.yaml")
     RobotProfile(shape=shape, **{field: 0.001}).outline  # the smallest allowed is built
+
+
+def test_a_file_mixing_the_two_formats_names_the_keys_of_each(tmp_path):
+    """An IR-SIM key under world: made the file an IR-SIM world, and the scenario's start an unknown key."""
+    from common.world_file import WorldFile
+
+    (tmp_path / "mixed.yaml").write_text("world: {width: 10, height: 10, gravity: 9.8}\nstart: [1, 1, 0]\ngoal: [9, 9]\n")
+    with pytest.raises(ConfigError, match=r"mixed\.yaml: goal: a project scenario's key, in a file that world\.gravity "
+                                          r"marks as an IR-SIM world; allowed: one format per file"):
+        WorldFile(tmp_path / "mixed.yaml")
