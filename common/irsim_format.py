@@ -686,19 +686,24 @@ def _robot_profile(entry: Entry, shape: _Shape, path: str) -> RobotProfile:
 
 
 def _lidar(entry: Entry, path: str) -> LidarSpec:
-    """The first lidar2d sensor as a LidarSpec (IR-SIM's lidar2d defaults when there is none)."""
+    """The first lidar2d sensor as a LidarSpec (IR-SIM's lidar2d defaults when there is none).
+    Every lidar2d is read and checked as IR-SIM builds each: only the first was, and a second one
+    with a misspelt key or a negative range loaded without a word."""
     item = value_of(entry, "sensors", [], path)
     if not isinstance(item.value, list):
         raise fail(item.path, f"expected a list of sensor mappings (got {quote(item.value)})")
-    sensor, sensor_path = {}, item.path
+    lidars = []
     for i, candidate in enumerate(item.value):
         candidate_path = f"{item.path}[{i}]"
         mapping_of(candidate, candidate_path)
         key = "name" if "name" in candidate else "type"
-        kind = string(candidate.get(key, "lidar2d"), join(candidate_path, key), SENSOR_TYPES)
-        if kind == "lidar2d":
-            sensor, sensor_path = candidate, candidate_path
-            break
+        if string(candidate.get(key, "lidar2d"), join(candidate_path, key), SENSOR_TYPES) == "lidar2d":
+            lidars.append(_lidar_spec(candidate, candidate_path))
+    return lidars[0] if lidars else _lidar_spec({}, item.path)
+
+
+def _lidar_spec(sensor: dict, sensor_path: str) -> LidarSpec:
+    """One lidar2d sensor's mapping as a LidarSpec."""
     check_keys(sensor, LIDAR_KEYS, sensor_path)
     at = lambda key: join(sensor_path, key)  # noqa: E731
     number = whole(sensor.get("number", 100), at("number"), 1, MAX_BEAMS)

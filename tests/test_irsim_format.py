@@ -159,6 +159,13 @@ def test_first_lidar2d_sensor_is_used(tmp_path):
     assert lidar.offset == (0.1, 0.05, 0.3) and lidar.noise_std == 0.05
 
 
+@pytest.mark.parametrize("second, message", [("{name: lidar2d, nubmer: 10}", r"sensors\[1\]\.nubmer: unknown key"),
+                                             ("{name: lidar2d, range_max: -5}", r"sensors\[1\]\.range_max: ")])
+def test_every_lidar2d_is_checked_not_only_the_first(second, message, tmp_path):
+    with pytest.raises(ConfigError, match=message):
+        load(tmp_path, ROBOT + f"  sensors:\n    - {{name: lidar2d, number: 20}}\n    - {second}\n")
+
+
 def test_lidar_noise_off_means_no_noise(tmp_path):
     assert load(tmp_path, ROBOT + "  sensors: [{std: 0.5}]\n").lidar.noise_std == 0.0
 
