@@ -41,9 +41,15 @@ def test_a_run_marks_its_directory_before_anything_else_and_restarts_only_its_ow
     first.prepare()
     assert (out / MARKER).is_file()
     first.release()  # it died before its first checkpoint: its own leftovers may be cleared
+    # What it wrote in a stage's TensorBoard folder goes; a note a user put beside it stays.
+    board = out / "stages" / "0-sparse" / "tensorboard" / "PPO_1"
+    board.mkdir(parents=True)
+    (board / "events.out.tfevents.1.host").write_bytes(b"event")
+    (board.parent / "my_notes.txt").write_text("mine\n")
     again = Runner(config, out)
     assert again.prepare() == {"done": [], "stages": {}}
     again.release()
+    assert not board.exists() and (board.parent / "my_notes.txt").read_text() == "mine\n"
     (out / MARKER).unlink()  # the same files, unmarked: no longer provably the run's
     with pytest.raises(Exception, match="not a run directory of this project"):
         Runner(config, out).prepare()

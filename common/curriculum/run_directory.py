@@ -22,7 +22,6 @@ import csv
 import io
 import json
 import math
-import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -159,6 +158,20 @@ def unstarted(out: Path) -> bool:
 
 
 def clear_unstarted(out: Path) -> None:
+    """Remove what an unstarted run wrote: its prepared files and its stages' TensorBoard event
+    files, then the directories left empty. A file the run did not write is kept (a user's notes in
+    a stage's TensorBoard folder were deleted with the folder)."""
     for name in _PREPARED:
         (out / name).unlink(missing_ok=True)
-    shutil.rmtree(out / "stages", ignore_errors=True)
+    stages = out / "stages"
+    if not stages.is_dir():
+        return
+    for event_file in stages.glob("*/tensorboard/**/events.out.tfevents.*"):
+        if event_file.is_file():
+            event_file.unlink()
+    # Deepest first, so a folder emptied above is removed in turn; one holding anything stays.
+    for folder in sorted((p for p in stages.rglob("*") if p.is_dir()), key=lambda p: len(p.parts), reverse=True):
+        if not any(folder.iterdir()):
+            folder.rmdir()
+    if not any(stages.iterdir()):
+        stages.rmdir()

@@ -160,7 +160,8 @@ class Runner:
                 raise ConfigError(state_path, None, "not the state this project writes (done stages, their results); "
                                   "the run directory is damaged")
         else:
-            if any(p.name not in (LOCK_NAME, MARKER) for p in self.out.iterdir()):
+            # Where a fresh start was cleared, what is left in stages/ is a user's own, kept beside the run.
+            if any(p.name not in (LOCK_NAME, MARKER) and not (fresh and p.name == "stages") for p in self.out.iterdir()):
                 raise ConfigError(self.out, None, "the run directory is not empty; pass --resume to continue it or choose another --out")
             atomic_write(self.out / "config.yaml",
                          lambda tmp: tmp.write_text(yaml.safe_dump(self.config.model_dump(mode="json"), sort_keys=False)))
