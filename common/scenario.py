@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import re
 import typing
 from pathlib import Path
 from typing import Annotated, Any, Literal, Sequence, Union
@@ -582,12 +583,15 @@ def allowed_keys(model: type[BaseModel], loc: Sequence[Any]) -> list[str] | None
     return sorted({key for m in models for key in m.model_fields}) if len(models) == 1 else None
 
 
+_UNION_TAG = re.compile(r"constrained-\w+|int|float|str|bool|none|function-\w+|lax-or-strict|json-or-python")
+
+
 def pydantic_error(source: str | Path | None, error: ValidationError, model: type[BaseModel] | None = None) -> ConfigError:
     """The first problem of a pydantic error as a one-line :class:`ConfigError`; an unknown key of
     ``model`` (the model validated) also lists the keys allowed there."""
     first = error.errors()[0]
-    # Union members add tags such as "list[constrained-int]" to the path: they name no field.
-    path = [part for part in first["loc"] if "[" not in str(part)]
+    # Union members add tags such as "list[constrained-int]" or "constrained-int" to the path: they name no field.
+    path = [part for part in first["loc"] if "[" not in str(part) and not _UNION_TAG.fullmatch(str(part))]
     field = ".".join(str(part) for part in path) or None
     message = first["msg"]
     if first["type"] == "extra_forbidden":

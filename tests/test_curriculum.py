@@ -59,6 +59,9 @@ def _with(change: dict, stage: dict | None = None) -> dict:
     (_with({"name": ""}), "name", "''; allowed: letters, digits"),
     (_with({}, {"scenarios": {"mix": {"sparse": float("inf")}}}), "stages.0.scenarios.mix.sparse", "less than or equal to 1000000"),
     (_with({}, {"eval": {"suite": "sparse", "episodes": 10**9}}), "stages.0.eval.episodes", "less than or equal to 1000000"),
+    (_with({}, {"budget": True}), "stages.0.budget", "Input should be a valid integer (got True)"),
+    # A union's member tag (constrained-int) named no field and was printed as one.
+    (_with({}, {"env_kwargs": {"action_delay": 10**9}}), "stages.0.env_kwargs.action_delay", "less than or equal to 20"),
     (_with({}, {"hyperparams": {"n_steps": 0}}), "stages.0.hyperparams.n_steps", "got 0; allowed: a whole number >= 1"),
     (_with({}, {"hyperparams": {"batch_size": 1}}), "stages.0.hyperparams.batch_size", "allowed: a whole number >= 2"),
     (_with({}, {"hyperparams": {"n_epochs": "five"}}), "stages.0.hyperparams.n_epochs", "got 'five'; allowed: a whole number"),

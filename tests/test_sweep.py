@@ -192,7 +192,8 @@ SPACES = [
     ("stages.0.budget: {randint: [1, 1.0e+300]}", "stages.0.budget.randint: got [1, 1e+300]; allowed: two whole numbers"),
     ("stages.0.budget: {randint: [0, 100]}", "stages.0.budget: randint value 0 is not valid in the curriculum "
                                              "(stages.0.budget: Input should be greater than or equal to 1"),
-    ("stages.0.n_envs: {uniform: [1, 8]}", "stages.0.n_envs: uniform value 3.674 is not valid in the curriculum"),
+    ("stages.0.n_envs: {uniform: [1, 8]}", "stages.0.n_envs: uniform value 1.0 is not valid in the curriculum "
+                                           "(stages.0.n_envs: Input should be a valid integer"),
     ("stages.0.max_steps: {choice: [60, 1.0e+9]}", "stages.0.max_steps: choice value 1000000000.0 is not valid"),
     ("stages.3.budget: {randint: [1, 5]}", "stages.3.budget: stages is a list of 1; allowed: an index from 0 to 0"),
     ("stages.0.name.x: {choice: [1]}", "stages.0.name.x: stages.0.name is 'open', not a mapping or list"),
