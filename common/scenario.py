@@ -543,10 +543,19 @@ class Scenario(Frozen):
         return problems
 
     def check(self, source: str | Path | None = None) -> "Scenario":
-        """Raise the first of :meth:`placement_problems`, if any."""
+        """Raise the first of :meth:`placement_problems`, if any, or a start within the robot's
+        radius of the world's boundary walls. (Only here, for scenarios a user writes: the
+        generators keep their own acceptance rule, so every suite stays the same.)"""
         problems = self.placement_problems(source)
         if problems:
             raise problems[0]
+        x, y = self.start[:2]
+        x0, y0 = self.world.offset
+        gap = min(x - x0, x0 + self.world.width - x, y - y0, y0 + self.world.height - y)
+        if self.world.walls and gap < self.robot.bounding_radius - 1e-9:  # 10 - 9.8 is a hair under 0.2
+            # It collided on the first step, and the episode ended before it began.
+            raise ConfigError(source, "start", f"({x:g}, {y:g}) is {gap:.2f} m from the world's boundary wall; allowed: "
+                              f"at least {self.robot.bounding_radius:g} m (the robot's radius), or world.walls: false")
         return self
 
     def _extent(self) -> str:

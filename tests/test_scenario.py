@@ -350,3 +350,17 @@ def test_a_file_mixing_the_two_formats_names_the_keys_of_each(tmp_path):
     with pytest.raises(ConfigError, match=r"mixed\.yaml: goal: a project scenario's key, in a file that world\.gravity "
                                           r"marks as an IR-SIM world; allowed: one format per file"):
         WorldFile(tmp_path / "mixed.yaml")
+
+
+def test_a_start_within_the_robot_s_radius_of_a_wall_is_refused_where_written(tmp_path):
+    """It passed validation and collided on the first step; generated worlds keep their own rule."""
+    from common.scenario import load_scenario
+
+    (tmp_path / "s.yaml").write_text("start: [0.05, 5, 0]\ngoal: [9, 9]\n")
+    with pytest.raises(ConfigError, match=r"s\.yaml: start: \(0\.05, 5\) is 0\.05 m from the world's boundary wall; "
+                                          r"allowed: at least 0\.2 m"):
+        load_scenario(tmp_path / "s.yaml")
+    (tmp_path / "s.yaml").write_text("start: [0.05, 5, 0]\ngoal: [9, 9]\nworld: {walls: false}\n")
+    assert load_scenario(tmp_path / "s.yaml").start[0] == 0.05
+    (tmp_path / "s.yaml").write_text("start: [0.2, 9.8, 0]\ngoal: [9, 9]\n")  # exactly the radius: allowed
+    load_scenario(tmp_path / "s.yaml")
