@@ -24,9 +24,12 @@ class NavEnv(NavigationEnv):
     ``action_mapping="rectified"`` makes a[0] <= 0 a stop instead of spreading a[0] linearly.
 
     ## Observation Space
-    ``observation="nav7"`` (default, the tutorial's 7 values), ``"lidar43"`` (36 lidar sectors) or
-    ``"lidar43_log"`` (the same sectors on a log range scale); normalised ``Box`` in [-1, 1]; the
-    index tables are in :mod:`common.observations`.
+    ``observation="nav7"`` (default, the tutorial's 7 values), ``"lidar43"`` (36 lidar sectors),
+    ``"lidar43_log"`` (the same sectors on a log range scale), ``"lidar79_motion"`` (and each
+    sector's range rate, for movers), ``"lidar49_robot"`` (the sectors as clearance from the
+    footprint, and the robot's size and limits) or ``"lidar51_route"`` (``lidar49_robot`` and where
+    the route to the goal is 1 m on); normalised ``Box`` in [-1, 1]; the index tables are in
+    :mod:`common.observations` and docs/envs.md.
 
     ## Rewards
     A weighted sum of named terms (:mod:`common.rewards`). ``reward="default"``: 10 x metres gained

@@ -59,8 +59,10 @@ class WarehouseNavEnv(NavigationEnv):
     ``action_mapping="rectified"`` makes a[0] <= 0 a stop instead of spreading a[0] linearly.
 
     ## Observation Space
-    ``observation="lidar43"`` (default, the 3D tutorial's 43 values), ``"lidar43_log"`` or ``"nav7"``;
-    normalised ``Box`` in [-1, 1]; the index tables are in :mod:`common.observations`. With ``camera=True`` a
+    ``observation="lidar43"`` (default, the 3D tutorial's 43 values), or any other layout of
+    :data:`common.observations.LAYOUTS` (``"lidar43_log"``, ``"nav7"``, ``"lidar79_motion"``,
+    ``"lidar49_robot"``, ``"lidar51_route"``: flatland's env describes each); normalised ``Box`` in
+    [-1, 1]; the index tables are in :mod:`common.observations`. With ``camera=True`` a
     ``Dict``: ``"state"`` (that Box), ``"rgb"`` ``Box(0, 255, (240, 320, 3), uint8)`` and ``"depth"``
     ``Box(0, 20, (240, 320, 1), float32)`` in metres, from the camera above and behind the body.
 

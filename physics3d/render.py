@@ -40,7 +40,14 @@ class ChaseCamera:
         """An RGB frame (H, W, 3) uint8 of the robot at its current pose."""
         x, y, yaw = readings.pose
         c, s = math.cos(yaw), math.sin(yaw)
-        eye = (x - self.back * c, y - self.back * s, self.up)
+        eye_x, eye_y = x - self.back * c, y - self.back * s
+        world = self.world.scenario.world
+        if world.walls:
+            # Kept inside the walls: from behind one, a robot backed up to it was not in the frame.
+            (x0, y0), margin = world.offset, 0.05
+            eye_x = min(max(eye_x, x0 + margin), x0 + world.width - margin)
+            eye_y = min(max(eye_y, y0 + margin), y0 + world.height - margin)
+        eye = (eye_x, eye_y, self.up)
         target = (x + self.ahead * c, y + self.ahead * s, 0.1)
         return self.camera.look_at(eye, target, segmentation=False)["rgb"]
 

@@ -546,6 +546,17 @@ def test_rgb_array_render_is_a_chase_camera_frame():
     env.close()
 
 
+def test_the_chase_camera_stays_inside_the_walls_and_sees_the_robot():
+    """`crowd`'s seed 1 starts the robot with its back to a wall: the camera behind it was outside the
+    walls, and its frame showed the wall alone."""
+    env = make(world="crowd", render_mode="rgb_array")
+    env.reset(seed=1)
+    frame = env.render().astype(int)
+    env.close()
+    robot_blue = (frame[..., 2] > 150) & (frame[..., 0] < 80) & (frame[..., 1] < 80)
+    assert robot_blue.sum() > 500, f"{robot_blue.sum()} pixels of the robot's blue body in the frame"
+
+
 def test_gui_refuses_to_open_without_a_display(monkeypatch):
     monkeypatch.delenv("DISPLAY", raising=False)
     if not sys.platform.startswith("linux"):
