@@ -364,3 +364,14 @@ def test_a_start_within_the_robot_s_radius_of_a_wall_is_refused_where_written(tm
     assert load_scenario(tmp_path / "s.yaml").start[0] == 0.05
     (tmp_path / "s.yaml").write_text("start: [0.2, 9.8, 0]\ngoal: [9, 9]\n")  # exactly the radius: allowed
     load_scenario(tmp_path / "s.yaml")
+
+
+def test_a_goal_within_its_radius_of_the_start_is_refused_where_written(tmp_path):
+    """The episode was a success before the robot moved (+100 at step 1)."""
+    from common.scenario import load_scenario
+
+    (tmp_path / "s.yaml").write_text("start: [5, 5, 0]\ngoal: [5.1, 5]\n")
+    with pytest.raises(ConfigError, match=r"s\.yaml: goal: \(5\.1, 5\.0\) is within goal_threshold \(0\.3 m\) of the start"):
+        load_scenario(tmp_path / "s.yaml")
+    (tmp_path / "s.yaml").write_text("start: [5, 5, 0]\ngoal: [5.31, 5]\n")
+    load_scenario(tmp_path / "s.yaml")
