@@ -59,14 +59,14 @@ def _image_occupancy(path: str) -> np.ndarray:
     try:
         with Image.open(io.BytesIO(data)) as image:  # the header only: a huge image is refused undecoded
             width, height = image.size
-        if width * height <= MAX_CELLS:
-            grid = mpimg.imread(io.BytesIO(data), format=Path(path).suffix.lstrip(".") or None)
+        too_large = width * height > MAX_CELLS
+        grid = None if too_large else mpimg.imread(io.BytesIO(data), format=Path(path).suffix.lstrip(".") or None)
     except (UnidentifiedImageError, Image.DecompressionBombError, OSError, ValueError) as exc:
         # PIL refuses a header of more pixels than its own cap before ours can (a bomb).
         why = str(exc).split(",")[0] if isinstance(exc, Image.DecompressionBombError) else "unreadable image data"
         raise ConfigError(path, "world.obstacle_map", f"{why}; allowed: a PNG or another image of at most "
                           f"{MAX_CELLS:,} pixels") from None
-    if width * height > MAX_CELLS:
+    if too_large:
         raise ConfigError(path, "world.obstacle_map", f"{width} x {height} pixels; allowed: at most {MAX_CELLS:,} pixels")
     if grid.ndim > 2:
         grid = np.dot(grid[..., :3], [0.2989, 0.5870, 0.1140])

@@ -556,8 +556,8 @@ class Scenario(Frozen):
             # It collided on the first step, and the episode ended before it began.
             raise ConfigError(source, "start", f"({x:g}, {y:g}) is {gap:.2f} m from the world's boundary wall; allowed: "
                               f"at least {self.robot.bounding_radius:g} m (the robot's radius), or world.walls: false")
-        if math.dist((x, y), self.goal) <= self.goal_threshold:
-            # The episode was a success before the robot moved.
+        if math.dist((x, y), self.goal) < self.goal_threshold:
+            # The episode was a success before the robot moved (common.task's test: nearer than the radius).
             raise ConfigError(source, "goal", f"{tuple(self.goal)} is within goal_threshold ({self.goal_threshold:g} m) "
                               f"of the start; allowed: farther from the start")
         return self

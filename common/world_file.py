@@ -12,9 +12,9 @@ from common.scenario import Scenario, scenario_from_mapping
 from common.yaml_io import read_yaml_mapping
 
 _IRSIM_ONLY_KEYS = {"obstacle", "gui", "custom", "irsim"}
-# A project scenario's top-level keys that an IR-SIM world file does not have.
-_SCENARIO_ONLY_KEYS = {"start", "goal", "obstacles", "lidar", "goal_threshold", "grid_map", "robot_motion", "kind",
-                       "difficulty", "seed"}
+# A project scenario's top-level keys that an IR-SIM world file does not have (IR-SIM's share
+# world and robot; a name is harmless in either).
+_SCENARIO_ONLY_KEYS = set(Scenario.model_fields) - {"world", "robot", "name"}
 _IRSIM_ROBOT_KEYS = {"state", "sensors", "vel_max", "vel_min", "distribution", "number"}
 # Keys of IR-SIM's world section that a project scenario's world lacks (IR-SIM's empty world has no robot).
 _IRSIM_WORLD_KEYS = {"name", "sample_time", "step_mode", "control_mode", "obstacle_map", "mdownsample", "fog_map",

@@ -27,6 +27,8 @@ def _linear(start: float):
 
 
 def _schedule(value: Any, source, field: str) -> Any:
+    """A number as it is (:func:`_check_ranges` has checked it), or ``"lin_<number>"`` as a
+    linear schedule from that number to 0."""
     if isinstance(value, str):
         try:
             kind, number = value.split("_", 1)
@@ -35,7 +37,7 @@ def _schedule(value: Any, source, field: str) -> Any:
             return _linear(float(number))
         except ValueError:
             raise ConfigError(source, field, f"{quote(value)}: allowed: a number > 0 or 'lin_<number>' (linear to 0)") from None
-    return _checked(value, source, field, *_RANGES[field.rsplit(".", 1)[-1]])
+    return value
 
 
 # Stable-baselines3's numeric arguments: (type, low, high, low included). Unchecked, a zero
@@ -44,14 +46,17 @@ _RANGES: dict[str, tuple[type, float, float, bool]] = {
     "learning_rate": (float, 0.0, math.inf, False), "clip_range": (float, 0.0, math.inf, False),
     "n_steps": (int, 1, 10**6, True), "batch_size": (int, 2, 10**7, True), "n_epochs": (int, 1, 1000, True),
     "gamma": (float, 0.0, 1.0, False), "gae_lambda": (float, 0.0, 1.0, True), "vf_coef": (float, 0.0, 1e6, True),
-    "max_grad_norm": (float, 0.0, math.inf, False), "buffer_size": (int, 1, 10**8, True),
-    "learning_starts": (int, 0, 10**9, True), "tau": (float, 0.0, 1.0, False), "policy_delay": (int, 1, 10**6, True),
-    "target_policy_noise": (float, 0.0, 1e6, True), "target_noise_clip": (float, 0.0, 1e6, True),
+    "max_grad_norm": (float, 0.0, math.inf, False), "target_kl": (float, 0.0, math.inf, False),
+    "buffer_size": (int, 1, 10**8, True), "learning_starts": (int, 0, 10**9, True), "tau": (float, 0.0, 1.0, False),
+    "policy_delay": (int, 1, 10**6, True), "target_policy_noise": (float, 0.0, 1e6, True),
+    "target_noise_clip": (float, 0.0, 1e6, True),
 }
+_NULLABLE = {"target_kl"}  # SB3's default, None: no early stop
+_SCHEDULES = ("learning_rate", "clip_range")  # a number, or a schedule written as text
 
 
-def _checked(value: Any, source, field: str, kind: type, low: float, high: float, low_included: bool) -> Any:
-    """``value`` if it is a ``kind`` within its range (NaN and inf outside any), else a one-line error."""
+def _checked(value: Any, source, field: str, kind: type, low: float, high: float, low_included: bool) -> None:
+    """A one-line error unless ``value`` is a ``kind`` within its range (NaN and inf outside any)."""
     whole = kind is int
     ok = (not isinstance(value, bool) and isinstance(value, int if whole else (int, float))
           and (low <= value if low_included else low < value) and value <= high)
@@ -59,18 +64,15 @@ def _checked(value: Any, source, field: str, kind: type, low: float, high: float
         what = "a whole number" if whole else "a finite number"
         bounds = f"{'>=' if low_included else '>'} {low:g}" + (f" and <= {high:g}" if high < math.inf else "")
         raise ConfigError(source, field, f"got {quote(value)}; allowed: {what} {bounds}")
-    return value
 
 
 def _check_ranges(values: dict[str, Any], source, field: str) -> None:
     for key, value in values.items():
-        if key in _RANGES and key not in ("learning_rate", "clip_range"):  # schedules: checked by _schedule
-            _checked(value, source, f"{field}.{key}", *_RANGES[key])
-    target_kl, use_sde = values.get("target_kl"), values.get("use_sde", False)
-    if target_kl is not None:
-        _checked(target_kl, source, f"{field}.target_kl", float, 0.0, math.inf, False)
-    if not isinstance(use_sde, bool):
-        raise ConfigError(source, f"{field}.use_sde", f"got {quote(use_sde)}; allowed: true or false")
+        if key not in _RANGES or (value is None and key in _NULLABLE) or (key in _SCHEDULES and isinstance(value, str)):
+            continue
+        _checked(value, source, f"{field}.{key}", *_RANGES[key])
+    if not isinstance(values.get("use_sde", False), bool):
+        raise ConfigError(source, f"{field}.use_sde", f"got {quote(values['use_sde'])}; allowed: true or false")
 
 
 def _noise(value: Any, action_dim: int, source, field: str) -> Any:

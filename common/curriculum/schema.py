@@ -53,8 +53,8 @@ from common.yaml_io import read_yaml_mapping
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(frozen=True, extra="forbid")
-# Whole numbers are strict: in lax mode `budget: true` was a budget of one step.
+    # Strict types: in pydantic's lax mode `budget: true` was a budget of one step.
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=True)
 
 
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
@@ -103,9 +103,9 @@ class EvalSpec(_Strict):
     """Periodic evaluation on held-out scenarios (the suite's eval split, disjoint from training)."""
 
     suite: str
-    episodes: Annotated[int, Field(strict=True, ge=1, le=MAX_EPISODES)] = 100
-    every: Annotated[int, Field(strict=True, ge=1)] = 50_000
-    final_episodes: Annotated[int, Field(strict=True, ge=1, le=MAX_EPISODES)] | None = None  # the report's final evaluation (default: episodes)
+    episodes: Annotated[int, Field(ge=1, le=MAX_EPISODES)] = 100
+    every: Annotated[int, Field(ge=1)] = 50_000
+    final_episodes: Annotated[int, Field(ge=1, le=MAX_EPISODES)] | None = None  # the report's final evaluation (default: episodes)
 
     @field_validator("suite")
     @classmethod
@@ -130,14 +130,14 @@ class StageSpec(_Strict):
     observation: Literal[LAYOUTS] = "lidar43"  # type: ignore[valid-type]
     action_mapping: Literal[MAPPINGS] = "linear"  # type: ignore[valid-type]
     reward: str | dict[str, Any] = "default"
-    max_steps: Annotated[int, Field(strict=True, ge=1, le=MAX_STEPS)] = 500
+    max_steps: Annotated[int, Field(ge=1, le=MAX_STEPS)] = 500
     algorithm: Literal[ALGORITHMS] = "ppo"  # type: ignore[valid-type]
     hyperparams: dict[str, Any] = {}
-    n_envs: Annotated[int, Field(strict=True, ge=1, le=256)] = 8
+    n_envs: Annotated[int, Field(ge=1, le=256)] = 8
     vec_env: Literal["dummy", "subproc"] = "dummy"
     optimizer_kernels: Literal[OPTIMIZER_KERNELS] = "foreach"  # type: ignore[valid-type]
     normalize: bool = False
-    budget: Annotated[int, Field(strict=True, ge=1)]
+    budget: Annotated[int, Field(ge=1)]
     eval: EvalSpec
     promote: PromoteSpec | None = None
     init_from: str | None = None
@@ -148,7 +148,7 @@ class EvidenceSpec(_Strict):
     """Evidence for a transfer: the last stage (which starts from the previous stage's policy) is
     also run from scratch, and both arms over several seeds (common/curriculum/evidence.py)."""
 
-    seeds: Annotated[int, Field(strict=True, ge=1, le=20)] = 3
+    seeds: Annotated[int, Field(ge=1, le=20)] = 3
     scratch: bool = True
 
 
@@ -156,7 +156,7 @@ class CurriculumConfig(_Strict):
     """A curriculum: stages run in order, each optionally continuing from the previous policy."""
 
     name: Name
-    seed: Annotated[int, Field(strict=True, ge=0, le=2**31 - 1)] = 0
+    seed: Annotated[int, Field(ge=0, le=2**31 - 1)] = 0
     device: Literal["auto", "cpu", "cuda", "mps"] = "auto"
     stages: Annotated[list[StageSpec], Field(min_length=1)]
     evidence: EvidenceSpec | None = None
