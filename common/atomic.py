@@ -5,23 +5,42 @@ from __future__ import annotations
 import os
 import tempfile
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterable, Mapping
 
+TEMPORARY_SUFFIX = ".tmp"
 _UMASK = os.umask(0)
 os.umask(_UMASK)
 
 
 def atomic_write(path: str | Path, write: Callable[[Path], object]) -> Path:
     """Call ``write(tmp_path)`` then rename the temporary file over ``path``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(handle)
+    return atomic_write_all({Path(path): write})[0]
+
+
+def atomic_write_all(writes: Mapping[Path, Callable[[Path], object]]) -> list[Path]:
+    """Write each file to a temporary beside it, then rename them all over their paths.
+
+    Files that belong together (a comparison's table, episodes and chart): a kill while they are
+    written leaves the earlier set whole; only a kill between the renames, microseconds apart,
+    could mix two sets.
+    """
+    temporaries: dict[Path, Path] = {}
     try:
-        write(Path(tmp))
-        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600 files; give the usual permissions
-        os.replace(tmp, path)
+        for path, write in writes.items():
+            path.parent.mkdir(parents=True, exist_ok=True)
+            handle, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=TEMPORARY_SUFFIX)
+            os.close(handle)
+            temporaries[path] = Path(tmp)
+            write(Path(tmp))
+            os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600 files; give the usual permissions
+        for path, tmp in temporaries.items():
+            os.replace(tmp, path)
     finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return path
+        for tmp in temporaries.values():
+            tmp.unlink(missing_ok=True)
+    return list(writes)
+
+
+def is_temporary_of(name: str, file_names: Iterable[str]) -> bool:
+    """Whether ``name`` is a temporary a killed :func:`atomic_write` left beside one of ``file_names``."""
+    return name.endswith(TEMPORARY_SUFFIX) and any(name.startswith(f".{file}.") for file in file_names)

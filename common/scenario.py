@@ -39,6 +39,7 @@ from common.fields import (  # noqa: F401  (re-exported: the scenario's caps and
     Frozen,
     Length,
     NonNegativeLength,
+    Number,
     Point,
     Speed,
 )
@@ -175,7 +176,7 @@ Obstacle = Annotated[
 ]
 
 
-PositiveSpeed = Annotated[float, Field(gt=0.0, le=MAX_SPEED)]
+PositiveSpeed = Annotated[Number, Field(gt=0.0, le=MAX_SPEED)]
 MAX_PARTS = 32  # of a compound footprint: each is a collision shape the robot carries every step
 FootprintVertices = Annotated[tuple[tuple[Coordinate, Coordinate], ...], Field(min_length=3, max_length=MAX_VERTICES)]
 
@@ -232,7 +233,7 @@ class RobotProfile(Frozen):
     width: BodyLength = 0.2
     vertices: FootprintVertices | None = OMITTED_WHEN_ABSENT
     parts: Annotated[tuple[FootprintPart, ...], Field(min_length=1, max_length=MAX_PARTS)] | None = OMITTED_WHEN_ABSENT
-    footprint_offset: Annotated[float, Field(ge=-MAX_LENGTH, le=MAX_LENGTH)] = omitted_at_default(0.0)
+    footprint_offset: Annotated[Number, Field(ge=-MAX_LENGTH, le=MAX_LENGTH)] = omitted_at_default(0.0)
     kinematics: Literal["diff", "omni", "omni_angular", "acker"] = omitted_at_default("diff")
     wheel_radius: Length = 0.05
     wheel_base: Length = 0.22
@@ -251,7 +252,7 @@ class RobotProfile(Frozen):
     accel_lateral: Acceleration = omitted_at_default(math.inf)
     accel_steer: Acceleration = omitted_at_default(math.inf)
     encoder_noise: Fraction = 0.0
-    motion_noise: tuple[Annotated[float, Field(ge=0.0, le=100.0)], ...] | None = OMITTED_WHEN_ABSENT
+    motion_noise: tuple[Annotated[Number, Field(ge=0.0, le=100.0)], ...] | None = OMITTED_WHEN_ABSENT
     static: bool = omitted_at_default(False)
 
     @model_validator(mode="after")
@@ -361,8 +362,8 @@ class LidarSpec(Frozen):
     beams: Annotated[int, Field(ge=1, le=4096)] = 36
     range_min: NonNegativeLength = 0.0
     range_max: Length = 5.0
-    angle_range: Annotated[float, Field(gt=0.0, le=2.0 * math.pi + 1e-9)] = 2.0 * math.pi
-    offset: tuple[Annotated[float, Field(ge=-MAX_LENGTH, le=MAX_LENGTH)], Annotated[float, Field(ge=-MAX_LENGTH, le=MAX_LENGTH)], Angle] = (0.0, 0.0, 0.0)
+    angle_range: Annotated[Number, Field(gt=0.0, le=2.0 * math.pi + 1e-9)] = 2.0 * math.pi
+    offset: tuple[Annotated[Number, Field(ge=-MAX_LENGTH, le=MAX_LENGTH)], Annotated[Number, Field(ge=-MAX_LENGTH, le=MAX_LENGTH)], Angle] = (0.0, 0.0, 0.0)
     noise_std: NonNegativeLength = 0.0
     repeat_end_beam: bool = False
 
@@ -407,7 +408,7 @@ class WorldSpec(Frozen):
     width: Length = 10.0
     height: Length = 10.0
     offset: Point = (0.0, 0.0)
-    step_time: Annotated[float, Field(gt=0.0, le=10.0)] = 0.1
+    step_time: Annotated[Number, Field(gt=0.0, le=10.0)] = 0.1
     walls: bool = True
     integrator: Literal["euler", "exact"] = "euler"
     collision_mode: Literal["stop", "unobstructed", "unobstructed_obstacles"] = Field(
@@ -556,6 +557,13 @@ class Scenario(Frozen):
             # It collided on the first step, and the episode ended before it began.
             raise ConfigError(source, "start", f"({x:g}, {y:g}) is {gap:.2f} m from the world's boundary wall; allowed: "
                               f"at least {self.robot.bounding_radius:g} m (the robot's radius), or world.walls: false")
+        for index, obstacle in enumerate(self.obstacles):
+            left, bottom, right, top = obstacle.bounds()
+            outside = right < x0 or left > x0 + self.world.width or top < y0 or bottom > y0 + self.world.height
+            if self.world.walls and outside and getattr(obstacle, "motion", None) is None:
+                # Behind the walls no beam and no robot meets it: a sign of a wrong coordinate, not a design.
+                raise ConfigError(source, f"obstacles.{index}", f"lies entirely outside the world {self._extent()}; "
+                                  "allowed: an obstacle that overlaps the world, or world.walls: false")
         if math.dist((x, y), self.goal) < self.goal_threshold:
             # The episode was a success before the robot moved (common.task's test: nearer than the radius).
             raise ConfigError(source, "goal", f"{tuple(self.goal)} is within goal_threshold ({self.goal_threshold:g} m) "

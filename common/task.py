@@ -16,13 +16,17 @@ from __future__ import annotations
 
 import math
 import numbers
-from typing import Any, Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
 from common.errors import ConfigError, quote
 from common.readings import Readings
 from common.scenario import MAX_LENGTH, Scenario
+
+if TYPE_CHECKING:
+    from common.conditions import Conditions
 
 OUTCOMES = ("success", "collision", "timeout", "stuck")
 DEFAULT_MAX_STEPS = 500
@@ -47,6 +51,31 @@ def threshold_range(value: GoalThreshold) -> tuple[float, float] | None:
     if not (0.0 < low <= high <= MAX_LENGTH):
         raise ConfigError(None, "goal_threshold", f"got {quote(value)}; allowed: 0 < low <= high <= {MAX_LENGTH:g} m")
     return low, high
+
+
+# Env arguments besides the conditions (common/conditions.py) that shape training only.
+TASK_OPTIONS = {"flatland": ("goal_threshold", "resample"), "physics3d": ("goal_threshold", "resample", "camera")}
+
+
+def check_env_kwargs(env_kwargs: Mapping[str, Any], tier: str, source: str | Path | None, field: str) -> "Conditions":
+    """Every key a condition of ``tier`` or one of its task options, every value valid (a
+    :class:`ConfigError` naming ``source`` and ``field.key``); the conditions, as the tier fills them in."""
+    from common.conditions import CONDITION_KEYS, ONLY_2D, ONLY_3D, conditions_of
+
+    other_tier = ONLY_3D if tier == "flatland" else ONLY_2D
+    allowed = sorted((*(k for k in CONDITION_KEYS if k not in other_tier), *TASK_OPTIONS[tier]))
+    for key in env_kwargs:
+        if key not in allowed:
+            raise ConfigError(source, f"{field}.{key}", f"not a {tier} env argument; allowed: {', '.join(allowed)}")
+    try:
+        conditions = conditions_of(dict(env_kwargs), source, field).for_tier(tier)
+        if "goal_threshold" in env_kwargs:
+            threshold_range(env_kwargs["goal_threshold"])
+    except ConfigError as error:
+        raise ConfigError(source, error.field if error.source else f"{field}.{error.field}", error.problem) from None
+    if "resample" in env_kwargs and not isinstance(env_kwargs["resample"], bool):
+        raise ConfigError(source, f"{field}.resample", f"got {quote(env_kwargs['resample'])}; allowed: true or false")
+    return conditions
 
 
 def judged_radius(env_kwargs: Mapping[str, Any]) -> float | None:

@@ -450,7 +450,7 @@ def test_a_policy_trained_on_the_urdf_robot_meets_its_2d_profile_in_flatland_and
     assert robot("--world", "flatland") == "physics3d" and robot("--world", "irsim") == "physics3d"
     assert robot("--world", "physics3d") == "physics3d"  # the tier's own default there
     assert robot("--world", "flatland", "--env-kwargs", "robot:{radius: 0.3}") == {"radius": 0.3}
-    update_manifest(path, {"env_kwargs": {"robot": None, "robot_family": False}})  # said, but no robot
+    update_manifest(path, {"env_kwargs": {"robot": None}})  # said, but no robot
     agent = load_policy(path)
     assert robot("--world", "flatland") == "physics3d"
 

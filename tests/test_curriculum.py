@@ -58,6 +58,8 @@ def _with(change: dict, stage: dict | None = None) -> dict:
     (_with({"name": "../escape"}), "name", "'../escape'; allowed: letters, digits"),
     (_with({"name": ""}), "name", "''; allowed: letters, digits"),
     (_with({}, {"scenarios": {"mix": {"sparse": float("inf")}}}), "stages.0.scenarios.mix.sparse", "less than or equal to 1000000"),
+    (_with({}, {"scenarios": {"mix": {}}}), "stages.0.scenarios", "mix names no kind; allowed: a weight for one or more of open"),
+    (_with({}, {"scenarios": {"file": "/"}}), "stages.0.scenarios.file", "a directory, not a file: '/'; allowed: a scenario"),
     (_with({}, {"eval": {"suite": "sparse", "episodes": 10**9}}), "stages.0.eval.episodes", "less than or equal to 1000000"),
     (_with({}, {"budget": True}), "stages.0.budget", "Input should be a valid integer (got True)"),
     # A union's member tag (constrained-int) named no field and was printed as one.
@@ -116,6 +118,17 @@ def test_a_stage_whose_worlds_its_tier_or_its_policy_cannot_drive_is_refused(wor
         curriculum_from_mapping(data, path)
     assert str(error.value).startswith(f"{path}: ") and message in str(error.value) and "\n" not in str(error.value), \
         str(error.value)
+
+
+@pytest.mark.parametrize("data, what", [
+    ({"world": {"width": 10, "height": 10}, "start": [1, 1, 0], "goal": [8, 8]}, "is a scenario"),
+    ({"world": {"height": 10, "width": 10, "sample_time": 0.1}, "obstacle": []}, "is an IR-SIM world file"),
+])
+def test_a_world_file_given_as_a_curriculum_is_named_for_what_it_is(data, what):
+    with pytest.raises(ConfigError) as error:
+        curriculum_from_mapping(data, "w.yaml")
+    assert str(error.value) == (f"w.yaml: {what}, not a curriculum (it has no stages); "
+                                "try it with: curriculum compare --scenario-file FILE")
 
 
 def _movers_on_a_maze() -> str:

@@ -181,14 +181,24 @@ def test_a_pickle_in_place_of_weights_is_refused_without_running(untrained_polic
     (lambda m: m.update(tier="mars"), "nav_manifest.json: tier: Input should be 'flatland' or 'physics3d'"),
     (lambda m: m.update(policy_kwargs={"net_arc": [32]}),
      "nav_manifest.json: policy_kwargs.net_arc: unknown key (did you mean 'net_arch'?); allowed: activation_fn"),
+    # The env arguments are checked as a stage's are, for the tier the policy names.
+    (lambda m: m.update(env_kwargs={"goal_threshold": -1}),
+     "nav_manifest.json: env_kwargs: goal_threshold: got -1; allowed: 0 < low <= high <= 1000 m"),
+    (lambda m: m.update(env_kwargs={"friction": 0.5}), "env_kwargs: friction: not a flatland env argument"),
+    (lambda m: m.update(tier="physics3d", env_kwargs={"robot_family": True}),
+     "env_kwargs: robot_family: not a physics3d env argument"),
+    (lambda m: m.update(env_kwargs={"resample": "yes"}), "env_kwargs: resample: got 'yes'; allowed: true or false"),
 ])
-def test_an_inconsistent_manifest_is_a_one_line_refusal(untrained_policy, tmp_path, capsys, change, expected):
+@pytest.mark.parametrize("command", ["eval", "export"])
+def test_an_inconsistent_manifest_is_a_one_line_refusal(untrained_policy, tmp_path, capsys, change, expected, command):
     manifest = json.loads(zipfile.ZipFile(untrained_policy).read("nav_manifest.json"))
     change(manifest)
     bad = _rewrite(untrained_policy, tmp_path / "bad.zip", {"nav_manifest.json": json.dumps(manifest).encode()})
-    assert main(["eval", "--policy", str(bad), "--episodes", "1"]) == 2
+    args = ["--policy", str(bad), "--episodes", "1"] if command == "eval" else [str(bad), "--onnx", str(tmp_path / "p.onnx")]
+    assert main([command, *args]) == 2
     err = capsys.readouterr().err
     assert expected in err and err.count("\n") == 1, err
+    assert not (tmp_path / "p.onnx").exists()
 
 
 def test_oversized_members_are_refused_before_they_are_read(untrained_policy, tmp_path, capsys):

@@ -184,12 +184,16 @@ def test_the_cli_exports_scores_the_onnx_file_as_the_zip_and_refuses_bad_input_w
     # Sent to worker processes, the ONNX file is opened again there and scores as here.
     assert main(["eval", "--policy", str(out), "--suite", "sparse", "--episodes", "6", "--json", "--jobs", "2"]) == 0
     assert json.loads(capsys.readouterr().out) == scores[1]
-    for argv in (["export", str(ROOT / "README.md"), "--onnx", str(tmp_path / "x.onnx")],
-                 ["export", str(zip_path), "--onnx", str(tmp_path / "x.zip")],
-                 ["eval", "--policy", str(ROOT / "README.md") + ".onnx"]):
+    (tmp_path / "folder.onnx").mkdir()
+    for argv, expected in ((["export", str(ROOT / "README.md"), "--onnx", str(tmp_path / "x.onnx")], "README.md"),
+                           (["export", str(zip_path), "--onnx", str(tmp_path / "x.zip")], "ending in .onnx"),
+                           (["export", str(zip_path), "--onnx", str(tmp_path / "folder.onnx")],
+                            "folder.onnx' is a directory; allowed: the path of the .onnx file to write"),
+                           (["eval", "--policy", str(ROOT / "README.md") + ".onnx"], "README.md.onnx")):
         assert main(argv) == 2
-        assert capsys.readouterr().err.count("\n") == 1
-    assert not (tmp_path / "x.onnx").exists()
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and expected in err and ".tmp" not in err, err
+    assert not (tmp_path / "x.onnx").exists() and not any((tmp_path / "folder.onnx").iterdir())
 
 
 def _example_loop() -> str:

@@ -11,6 +11,7 @@ from common.curriculum.cli import main
 from common.curriculum.run_directory import MARKER
 from common.curriculum.runner import Runner
 from common.curriculum.schema import load_curriculum
+from common.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = ROOT / "tests/data/tiny_curriculum.yaml"
@@ -50,6 +51,9 @@ def test_a_run_marks_its_directory_before_anything_else_and_restarts_only_its_ow
     assert again.prepare() == {"done": [], "stages": {}}
     again.release()
     assert not board.exists() and (board.parent / "my_notes.txt").read_text() == "mine\n"
+    (out / "stages" / "notes.txt").write_text("mine too\n")  # a file, not a stage: the run is not provably unstarted
+    with pytest.raises(ConfigError, match="the run directory is not empty; pass --resume"):
+        Runner(config, out).prepare()
     (out / MARKER).unlink()  # the same files, unmarked: no longer provably the run's
     with pytest.raises(Exception, match="not a run directory of this project"):
         Runner(config, out).prepare()
@@ -132,6 +136,27 @@ def test_compare_writes_only_into_a_directory_of_its_own(tmp_path, capsys):
     assert "is not a directory" in capsys.readouterr().err
     assert main([*argv, "--out", str(tmp_path / "mine")]) == 0
     assert main([*argv, "--out", str(tmp_path / "mine")]) == 0  # an earlier comparison is replaced
+
+
+def test_a_comparison_killed_while_writing_leaves_the_earlier_one_whole(tmp_path, capsys, monkeypatch):
+    from common.curriculum import comparison
+
+    out = tmp_path / "mine"
+    argv = ["compare", "--episodes", "1", "--max-steps", "5", "--out", str(out)]
+    assert main([*argv, "--controllers", "go_to_goal"]) == 0
+    earlier = {p.name: p.read_bytes() for p in out.iterdir()}
+
+    def killed(*args, **kwargs):
+        raise KeyboardInterrupt  # the chart is written last: the table and episodes are new by then
+
+    monkeypatch.setattr(comparison, "bar_chart", killed)
+    with pytest.raises(KeyboardInterrupt):
+        main([*argv, "--controllers", "reactive"])
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == earlier
+    (out / ".comparison.md.x1y2.tmp").write_text("a kill -9 left this")  # not a reason to refuse the next one
+    monkeypatch.undo()
+    assert main([*argv, "--controllers", "reactive"]) == 0
+    assert "reactive" in (out / "comparison.md").read_text() and "reactive" in (out / "episodes.csv").read_text()
 
 
 def test_render_to_a_directory_is_one_line(tmp_path, capsys):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -375,3 +376,32 @@ def test_a_goal_within_its_radius_of_the_start_is_refused_where_written(tmp_path
         load_scenario(tmp_path / "s.yaml")
     (tmp_path / "s.yaml").write_text("start: [5, 5, 0]\ngoal: [5.31, 5]\n")
     load_scenario(tmp_path / "s.yaml")
+
+
+def test_a_static_obstacle_wholly_outside_the_walled_world_is_refused(tmp_path):
+    """Behind the walls nothing ever meets it: it was accepted, and the world was not the one meant."""
+    from common.scenario import load_scenario
+
+    base = "start: [1, 1, 0]\ngoal: [9, 9]\n"
+    (tmp_path / "s.yaml").write_text(base + "obstacles: [{type: circle, x: 5, y: 5, radius: 0.5},"
+                                            " {type: box, x: 15, y: 5, length: 1, width: 1}]\n")
+    with pytest.raises(ConfigError, match=r"s\.yaml: obstacles\.1: lies entirely outside the world \[0, 10\] x \[0, 10\]"):
+        load_scenario(tmp_path / "s.yaml")
+    # Touching the world's edge, beyond walls that are not there, or moving in: each meant, each kept.
+    for obstacle in ("{type: box, x: 10.5, y: 5, length: 1, width: 1}", "{type: box, x: 15, y: 5, length: 1, width: 1}",
+                     "{type: circle, x: 12, y: 5, radius: 0.3, motion: {goals: [[8, 5]]}}"):
+        walls = "world: {walls: false}\n" if "x: 15" in obstacle else ""
+        (tmp_path / "s.yaml").write_text(base + walls + f"obstacles: [{obstacle}]\n")
+        assert len(load_scenario(tmp_path / "s.yaml").obstacles) == 1
+
+
+@pytest.mark.parametrize("text, field", [("world: {width: true}\n", "world.width"),
+                                         ("start: [1, true, 0]\n", "start.1"),
+                                         ("robot: {radius: false}\n", "robot.radius")])
+def test_a_boolean_where_a_number_belongs_is_refused_not_read_as_one_or_zero(tmp_path, text, field):
+    from common.scenario import load_scenario
+
+    (tmp_path / "s.yaml").write_text("start: [1, 1, 0]\ngoal: [8, 8]\n" + text if "start" not in text
+                                     else text + "goal: [8, 8]\n")
+    with pytest.raises(ConfigError, match=rf"s\.yaml: {re.escape(field)}: .*allowed: a number"):
+        load_scenario(tmp_path / "s.yaml")

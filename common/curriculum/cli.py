@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 
+from common.atomic import atomic_write_all, is_temporary_of
 from common.errors import ConfigError, ScenarioWarning
 from common.task import MAX_EPISODES
 
@@ -314,9 +315,9 @@ def _compare(args: argparse.Namespace) -> int:
     table = markdown_table(summaries, title)
     if paired := paired_table(summaries):
         table += "\n" + paired
-    (out / "comparison.md").write_text(table)
-    write_csv(summaries, out / "episodes.csv")
-    bar_chart(summaries, out / "comparison.png", title)
+    atomic_write_all({out / "comparison.md": lambda tmp: tmp.write_text(table),
+                      out / "episodes.csv": lambda tmp: write_csv(summaries, tmp),
+                      out / "comparison.png": lambda tmp: bar_chart(summaries, tmp, title)})
     gifs = [_record(agent, scenarios[0], args, Path(args.gif) / f"{_file_name(agent.name)}.gif", radius=radius)[0]
             for agent in agents] if args.gif else []
     if args.json:
@@ -335,7 +336,8 @@ def _compare_directory(out: Path) -> Path:
     replaces); anything else is refused before a file is written."""
     if out.exists() and not out.is_dir():
         raise ConfigError(out, None, "is not a directory; --out names the comparison's directory")
-    if out.is_dir() and any(p.name not in COMPARE_FILES for p in out.iterdir()):
+    if out.is_dir() and any(p.name not in COMPARE_FILES and not is_temporary_of(p.name, COMPARE_FILES)
+                            for p in out.iterdir()):
         raise ConfigError(out, None, f"holds files other than a comparison's ({', '.join(COMPARE_FILES)}); "
                           "choose an empty or a new --out (nothing was changed)")
     out.mkdir(parents=True, exist_ok=True)

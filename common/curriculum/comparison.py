@@ -101,5 +101,5 @@ def bar_chart(summaries: Sequence[Summary], path: str | Path, title: str = "") -
     ax.set_title(title)
     ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
     figure.tight_layout()
-    figure.savefig(path)
+    figure.savefig(path, format="png")  # the format said: a temporary file's name does not end in .png
     return Path(path)

@@ -58,6 +58,8 @@ def export_onnx(policy_path: str | Path, out_path: str | Path) -> Path:
     out_path = Path(out_path)
     if out_path.suffix != ".onnx":
         raise ConfigError(None, "--onnx", f"{str(out_path)!r}: expected a file name ending in .onnx")
+    if out_path.is_dir():
+        raise ConfigError(None, "--onnx", f"{str(out_path)!r} is a directory; allowed: the path of the .onnx file to write")
     missing = [name for name in ("onnx", "onnxscript") if importlib.util.find_spec(name) is None]
     if missing:
         raise ConfigError(None, "--onnx", f"exporting needs {' and '.join(missing)} (torch's exporter): "

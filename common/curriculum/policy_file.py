@@ -57,7 +57,7 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator
 
 from common.actions import MAPPINGS
 from common.atomic import atomic_write
@@ -99,8 +99,8 @@ class Manifest(BaseModel):
     use_sde: bool = False
     timesteps: Annotated[int, Field(ge=0)] = 0
     n_updates: Annotated[int, Field(ge=0)] = 0
-    env_kwargs: dict[str, Any] = {}
     tier: Literal[TIERS] = "flatland"  # type: ignore[valid-type]  # where it trained last
+    env_kwargs: dict[str, Any] = {}  # after tier: checked for it
 
     @property
     def home(self) -> tuple[str, str, int, int] | None:
@@ -117,13 +117,15 @@ class Manifest(BaseModel):
 
     @field_validator("env_kwargs")
     @classmethod
-    def _valid_conditions(cls, value: dict[str, Any]) -> dict[str, Any]:
-        from common.conditions import conditions_of
+    def _valid_env_kwargs(cls, value: dict[str, Any], info: ValidationInfo) -> dict[str, Any]:
+        """As a stage's ``env_kwargs`` are checked: a policy is refused when it is opened, not at its first use."""
+        from common.task import check_env_kwargs
 
-        try:
-            conditions_of(value)
-        except ConfigError as error:
-            raise ValueError(f"{error.field}: {error.problem}") from None
+        if "tier" in info.data:  # else the tier's own error is the one to report
+            try:
+                check_env_kwargs(value, info.data["tier"], None, "env_kwargs")
+            except ConfigError as error:
+                raise ValueError(f"{error.field.removeprefix('env_kwargs.')}: {error.problem}") from None
         return value
 
 

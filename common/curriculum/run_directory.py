@@ -154,7 +154,8 @@ def unstarted(out: Path) -> bool:
         return False
     stages = out / "stages"
     # Before its first checkpoint a stage holds at most its TensorBoard log.
-    return not stages.exists() or all(p.name == "tensorboard" for stage in stages.iterdir() for p in stage.iterdir())
+    return not stages.exists() or all(stage.is_dir() and all(p.name == "tensorboard" for p in stage.iterdir())
+                                      for stage in stages.iterdir())
 
 
 def clear_unstarted(out: Path) -> None:

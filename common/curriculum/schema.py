@@ -37,7 +37,7 @@ from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, ValidationEr
                       model_validator)
 
 from common.actions import MAPPINGS
-from common.conditions import CONDITION_KEYS, ONLY_2D, ONLY_3D, Conditions, conditions_of
+from common.conditions import Conditions
 from common.curriculum.hyperparams import OPTIMIZER_KERNELS, policy_kwargs_from_yaml, resolve_hyperparams
 from common.curriculum.policy_file import ALGORITHMS
 from common.drive import refuse_other_drives
@@ -46,7 +46,7 @@ from common.generators import KINDS, SUITES
 from common.observations import LAYOUTS
 from common.rewards import resolve_reward_spec
 from common.scenario import pydantic_error
-from common.task import MAX_EPISODES, MAX_STEPS
+from common.task import MAX_EPISODES, MAX_STEPS, check_env_kwargs
 from common.tiers import TIERS
 from common.yaml_io import read_yaml_mapping
 
@@ -92,6 +92,8 @@ class ScenarioSpec(_Strict):
         given = [k for k in ("kind", "mix", "suite", "file") if getattr(self, k) is not None]
         if len(given) != 1:
             raise ValueError(f"give exactly one of kind, mix, suite or file (got {', '.join(given) or 'none'})")
+        if self.mix == {}:
+            raise ValueError(f"mix names no kind; allowed: a weight for one or more of {', '.join(KINDS)}")
         if self.suite is not None and self.suite not in KINDS:
             # A suite trains on its kind's training split; the *_unaware suites are eval-only.
             unknown = "an eval-only suite" if self.suite in SUITES else "unknown suite"
@@ -170,31 +172,6 @@ class CurriculumConfig(_Strict):
 
 
 _MANAGED = {"policy", "env", "seed", "device", "verbose", "tensorboard_log", "_init_setup_model"}
-# Env arguments besides the conditions (common/conditions.py) that shape training only.
-TASK_OPTIONS = {"flatland": ("goal_threshold", "resample"), "physics3d": ("goal_threshold", "resample", "camera")}
-
-
-def _check_env_kwargs(stage: StageSpec, source: str | Path, field: str) -> Conditions:
-    """Every key a condition of the stage's tier or one of its task options, every value valid;
-    the stage's conditions, as its tier fills them in."""
-    other_tier = ONLY_3D if stage.world == "flatland" else ONLY_2D
-    allowed = sorted((*(k for k in CONDITION_KEYS if k not in other_tier), *TASK_OPTIONS[stage.world]))
-    for key in stage.env_kwargs:
-        if key not in allowed:
-            raise ConfigError(source, f"{field}.{key}", f"not a {stage.world} env argument; allowed: {', '.join(allowed)}")
-    try:
-        conditions = conditions_of(stage.env_kwargs, source, field).for_tier(stage.world)
-        if "goal_threshold" in stage.env_kwargs:
-            from common.task import threshold_range
-
-            threshold_range(stage.env_kwargs["goal_threshold"])
-    except ConfigError as error:
-        raise ConfigError(source, error.field if error.source else f"{field}.{error.field}", error.problem) from None
-    if "resample" in stage.env_kwargs and not isinstance(stage.env_kwargs["resample"], bool):
-        raise ConfigError(source, f"{field}.resample", f"got {quote(stage.env_kwargs['resample'])}; allowed: true or false")
-    return conditions
-
-
 def _check_worlds(stage: StageSpec, conditions: Conditions, source: str | Path, field: str) -> None:
     """The stage's worlds (and so its robot) as its env gets them under ``conditions``: its
     scenario source built from the same argument (so refused where the env would refuse it: a
@@ -256,19 +233,24 @@ def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
         if refusal := kwargs.refused_by(stage.algorithm):
             raise ConfigError(source, f"{field}.hyperparams.policy_kwargs.{refusal[0]}",
                               f"{refusal[1]} (this stage's: {stage.algorithm})")
-    conditions = _check_env_kwargs(stage, source, f"{field}.env_kwargs")
+    conditions = check_env_kwargs(stage.env_kwargs, stage.world, source, f"{field}.env_kwargs")
     if stage.init_from == "previous" and index == 0:
         raise ConfigError(source, f"{field}.init_from", "the first stage has no previous stage; allowed: null or a policy path")
     if stage.init_from not in (None, "previous") and not Path(stage.init_from).is_file():
         raise ConfigError(source, f"{field}.init_from", f"no policy file {quote(stage.init_from)}; allowed: null, previous or a .zip path")
     if stage.scenarios.file is not None and not Path(stage.scenarios.file).is_file():
-        raise ConfigError(source, f"{field}.scenarios.file", f"no such file {quote(stage.scenarios.file)}")
+        what = "a directory, not a file" if Path(stage.scenarios.file).is_dir() else "no such file"
+        raise ConfigError(source, f"{field}.scenarios.file", f"{what}: {quote(stage.scenarios.file)}; allowed: a scenario "
+                          "or IR-SIM world YAML file")
     _check_worlds(stage, conditions, source, field)
 
 
 def curriculum_from_mapping(data: dict, source: str | Path | None = None) -> CurriculumConfig:
     """Validate a parsed curriculum mapping. Relative ``init_from`` and ``scenarios.file`` paths are
     resolved against the file's folder (``source``), as a curriculum shared with its files expects."""
+    if not is_curriculum(data) and (world := world_file_format(data)):
+        raise ConfigError(source, None, f"is {world}, not a curriculum (it has no stages); "
+                          "try it with: curriculum compare --scenario-file FILE")
     try:
         config = CurriculumConfig.model_validate(data)
     except ValidationError as exc:
@@ -301,6 +283,17 @@ def _resolve_paths(config: CurriculumConfig, base: Path) -> CurriculumConfig:
 def load_curriculum(path: str | Path) -> CurriculumConfig:
     """Read and validate a curriculum YAML file."""
     return curriculum_from_mapping(read_yaml_mapping(path), path)
+
+
+def world_file_format(data: dict) -> str | None:
+    """What a parsed YAML mapping without stages is, if a world file: "an IR-SIM world file" or
+    "a scenario" (one of the scenario's own keys at its top level)."""
+    from common.scenario import Scenario
+    from common.world_file import irsim_mark
+
+    if irsim_mark(data) is not None:
+        return "an IR-SIM world file"
+    return "a scenario" if (set(Scenario.model_fields) - {"name"}) & data.keys() else None
 
 
 def is_curriculum(data: dict) -> bool:
