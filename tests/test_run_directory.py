@@ -184,3 +184,22 @@ def test_a_damaged_run_state_is_refused_in_one_line_on_resume(tmp_path, capsys, 
     assert main(["run", str(TINY), "--out", str(out), "--resume", "--no-progress"]) == 2
     error = capsys.readouterr().err
     assert error.count("\n") == 1 and expected in error
+
+
+@pytest.mark.parametrize("device, flag", [("cuda", False), ("mps", True)])
+def test_a_device_this_machine_lacks_is_refused_before_training(tmp_path, capsys, monkeypatch, device, flag):
+    """stable-baselines3 trained the stage on the CPU, then its policy failed to load onto CUDA,
+    reported as a damaged policy file."""
+    import torch
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    monkeypatch.setattr(torch.backends.mps, "is_available", lambda: False)
+    curriculum, out = tmp_path / "c.yaml", tmp_path / "run"
+    curriculum.write_text(TINY.read_text().replace("device: cpu", "device: cpu" if flag else f"device: {device}"))
+    assert main(["run", str(curriculum), "--out", str(out), "--no-progress", *(["--device", device] if flag else [])]) == 2
+    where = f"--device: '{device}'" if flag else f"c.yaml: device: '{device}'"
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and where in error and "allowed here: auto, cpu" in error, error
+    assert not out.exists()
+    with pytest.raises(ConfigError, match=f"device: '{device}', but torch finds no"):
+        Runner(load_curriculum(curriculum), out, device=device)

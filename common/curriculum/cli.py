@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Callable, Sequence
 import numpy as np
 
 from common.atomic import atomic_write_all, is_temporary_of
-from common.errors import ConfigError, ScenarioWarning
+from common.errors import ConfigError, ScenarioWarning, did_you_mean
 from common.task import MAX_EPISODES
 
 if TYPE_CHECKING:
@@ -61,13 +61,14 @@ def _validated(path: str) -> str:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from common.curriculum.runner import Runner
+    from common.curriculum.runner import Runner, resolve_device
     from common.curriculum.schema import load_curriculum
 
     config = load_curriculum(args.file)
     out = Path(args.out) if args.out else Path("runs") / config.name
+    device = resolve_device(args.device, None, "--device") if args.device else resolve_device(config.device, args.file)
     try:
-        state = Runner(config, out, resume=args.resume, device=args.device, progress=not args.no_progress).run()
+        state = Runner(config, out, resume=args.resume, device=device, progress=not args.no_progress).run()
     except OSError as error:
         raise ConfigError(error.filename or out, None, f"{error.strerror or error}; every checkpoint written so far is "
                           f"whole: once this is fixed, continue with --resume") from None
@@ -479,7 +480,9 @@ def _key_value(text: str) -> tuple[str, object]:
 
     key, separator, value = text.partition(":")
     if not separator or key not in CONDITION_KEYS:
-        raise argparse.ArgumentTypeError(f"expected KEY:VALUE with KEY one of {', '.join(CONDITION_KEYS)}, got {text!r}")
+        hint = did_you_mean(key, CONDITION_KEYS) if separator else ""
+        raise argparse.ArgumentTypeError(f"expected KEY:VALUE with KEY one of {', '.join(CONDITION_KEYS)}, "
+                                         f"got {text!r}{hint}")
     try:
         return key, parse_yaml(value)
     except ConfigError:

@@ -41,17 +41,21 @@ from common.policy_agent import PolicyAgent
 from common.yaml_io import read_yaml
 
 
-def resolve_device(device: str) -> str:
-    """``auto`` picks CUDA, then Apple's MPS, then the CPU."""
-    if device != "auto":
-        return device
+def resolve_device(device: str, source: str | Path | None = None, field: str = "device") -> str:
+    """``auto`` picks CUDA, then Apple's MPS, then the CPU. A device this machine lacks is a
+    :class:`ConfigError` naming ``source`` and ``field``: stable-baselines3 would train on the CPU without a word,
+    and the stage's policy then failed to load onto the device asked for, after the whole stage."""
     import torch
 
-    if torch.cuda.is_available():
-        return "cuda"
-    if getattr(torch.backends, "mps", None) is not None and torch.backends.mps.is_available():
-        return "mps"
-    return "cpu"
+    cuda = torch.cuda.is_available()
+    mps = getattr(torch.backends, "mps", None) is not None and torch.backends.mps.is_available()
+    if device == "auto":
+        return "cuda" if cuda else "mps" if mps else "cpu"
+    if (device == "cuda" and not cuda) or (device == "mps" and not mps):
+        here = ", ".join(["auto", "cpu", *(["cuda"] if cuda else []), *(["mps"] if mps else [])])
+        raise ConfigError(source, field, f"{device!r}, but torch finds no {device.upper()} device on this machine; "
+                          f"allowed here: {here}")
+    return device
 
 
 def git_commit() -> str | None:
@@ -113,7 +117,7 @@ class Runner:
     def __init__(self, config: CurriculumConfig, out: Path, resume: bool = False, device: str | None = None,
                  progress: bool = True, on_evaluation: Callable[[dict], None] | None = None) -> None:
         self.config, self.out, self.resume = config, Path(out), resume
-        self.device = resolve_device(device or config.device)
+        self.device = resolve_device(device or config.device, field="--device" if device else "device")
         self.progress = progress
         self.on_evaluation = on_evaluation  # sees every periodic evaluation's eval.csv row (a sweep reports them)
         self.eval_log: EvalLog | None = None
