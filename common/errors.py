@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import difflib
 import reprlib
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterable
 
 QUOTE_CHARS = 80  # the most of a user's value an error message repeats
 MESSAGE_CHARS = 1000  # a safety net: no message, however built, floods a terminal (the longest allowed-keys list is ~300)
@@ -19,6 +20,12 @@ def quote(value: Any) -> str:
     """``repr(value)`` cut to about :data:`QUOTE_CHARS` characters, cheap even for huge or shared structures."""
     text = " ".join(_short.repr(value).split())  # one line, even for a numpy array's repr
     return text if len(text) <= QUOTE_CHARS else text[: QUOTE_CHARS - 3] + "..."
+
+
+def did_you_mean(given: object, allowed: Iterable[str]) -> str:
+    """" (did you mean 'x'?)" when one of ``allowed`` is close to ``given`` (a typo), else ""."""
+    close = difflib.get_close_matches(str(given), list(allowed), n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""
 
 
 class ScenarioWarning(UserWarning):

@@ -76,7 +76,7 @@ def _groups(scenario: Scenario) -> tuple[list[dict], list[dict]]:
     grouped: dict[str, list] = {}
     for index, obstacle in enumerate(scenario.obstacles):
         motion = getattr(obstacle, "motion", None)
-        where = f"obstacles.{index}.{obstacle.type}.motion"
+        where = f"obstacles.{index}.motion"
         if motion is None:
             obstacles.append(_obstacle(obstacle))
             continue

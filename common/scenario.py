@@ -14,7 +14,6 @@ than the world's diagonal.
 
 from __future__ import annotations
 
-import difflib
 import math
 import re
 import typing
@@ -26,7 +25,7 @@ import yaml
 from pydantic import BaseModel, Field, ValidationError, model_validator
 
 from common import geometry
-from common.errors import ConfigError, quote
+from common.errors import ConfigError, did_you_mean, quote
 from common.fields import (  # noqa: F401  (re-exported: the scenario's caps and types)
     MAX_COORDINATE,
     MAX_LENGTH,
@@ -457,7 +456,7 @@ class Scenario(Frozen):
             raise ValueError(f"{len(movers):,} moving obstacles; allowed: at most {MAX_MOVERS}")
         groups: dict[str, Motion] = {}
         for index, motion in movers + ([(-1, self.robot_motion)] if self.robot_motion is not None else []):
-            where = "robot_motion" if index < 0 else f"obstacles.{index}.{self.obstacles[index].type}.motion"
+            where = "robot_motion" if index < 0 else f"obstacles.{index}.motion"
             if self.world.walls:  # a walled world cannot be left: every goal must lie inside it
                 for k, (x, y) in enumerate(motion.goals):
                     if not self.world.contains(x, y):
@@ -589,19 +588,35 @@ def _models_in(annotation: Any) -> list[type[BaseModel]]:
 def allowed_keys(model: type[BaseModel], loc: Sequence[Any]) -> list[str] | None:
     """The keys allowed beside the unknown key at ``loc`` (a pydantic error's path from ``model``);
     None where the path leaves the models (a union member pydantic names by its tag, say)."""
-    models, tag = [model], "type"
-    for part in loc[:-1]:
+    models = _models_at(model, loc[:-1])
+    return sorted({key for m in models for key in m.model_fields}) if len(models) == 1 else None
+
+
+def _models_at(model: type[BaseModel], path: Sequence[Any]) -> list[type[BaseModel]]:
+    """The models a value at ``path`` from ``model`` may be (a union's members), or none."""
+    return _walk(model, path)[0]
+
+
+def _walk(model: type[BaseModel], path: Sequence[Any]) -> tuple[list[type[BaseModel]], list[Any]]:
+    """:func:`_models_at`, and ``path`` without the tagged unions' member tags pydantic puts in it
+    (``obstacles.0.circle.radius``: no one wrote a key ``circle``)."""
+    models, tag, written = [model], "type", []
+    for part in path:
         if isinstance(part, int):
+            written.append(part)
             continue  # a list's item: its models are already the field's
         held = [m.model_fields[part] for m in models if part in m.model_fields]
+        members = [m for m in models if tag in m.model_fields and m.model_fields[tag].default == part]
         if held:
             models = [inner for info in held for inner in _models_in(info.annotation)]
             tag = next((info.discriminator for info in held if isinstance(info.discriminator, str)), "type")
-        else:  # a tagged union's member: the one whose tag field holds that tag
-            models = [m for m in models if tag in m.model_fields and m.model_fields[tag].default == part]
-        if not models:
-            return None
-    return sorted({key for m in models for key in m.model_fields}) if len(models) == 1 else None
+        elif members:  # a tagged union's member: the one whose tag field holds that tag
+            models = members
+            continue
+        else:
+            models = []  # a key no model has (an unknown one), or one inside a plain value
+        written.append(part)
+    return models, written
 
 
 _UNION_TAG = re.compile(r"constrained-\w+|int|float|str|bool|none|function-\w+|lax-or-strict|json-or-python")
@@ -613,14 +628,26 @@ def pydantic_error(source: str | Path | None, error: ValidationError, model: typ
     first = error.errors()[0]
     # Union members add tags such as "list[constrained-int]" or "constrained-int" to the path: they name no field.
     path = [part for part in first["loc"] if "[" not in str(part) and not _UNION_TAG.fullmatch(str(part))]
+    raw, path = path, (_walk(model, path)[1] if model is not None else path)  # raw: the walk's, with the tags
     field = ".".join(str(part) for part in path) or None
     message = first["msg"]
     if first["type"] == "extra_forbidden":
-        allowed = allowed_keys(model, path) if model else None
+        allowed = allowed_keys(model, raw) if model else None
         message = "unknown key"
         if allowed:
-            close = difflib.get_close_matches(str(path[-1]) if path else "", allowed, n=1)
-            message += (f" (did you mean {close[0]!r}?)" if close else "") + f"; allowed: {', '.join(allowed)}"
+            message += did_you_mean(path[-1] if path else "", allowed) + f"; allowed: {', '.join(allowed)}"
+    elif first["type"] in ("union_tag_not_found", "union_tag_invalid"):
+        # pydantic's wording ("Unable to extract tag using discriminator") named no key a person wrote.
+        key = first["ctx"]["discriminator"].strip("'")
+        tags = [m.model_fields[key].default for m in _models_at(model, raw) if key in m.model_fields] if model else []
+        given = first["ctx"].get("tag")
+        field = f"{field}.{key}" if field else key
+        message = "missing" if given is None else quote(given) + did_you_mean(given, tags)
+        message += f"; allowed: {', '.join(tags)}" if tags else ""
+    elif first["type"] == "missing" and path and isinstance(path[-1], int):
+        # An item missing from a fixed-length list: goal: [9.0] said "goal.1: Field required".
+        field = ".".join(str(part) for part in path[:-1]) or None
+        message = f"too few values (got {quote(first['input'])}); item {path[-1]} is missing"
     elif first["type"] == "value_error":
         message = message.removeprefix("Value error, ")  # our validators' messages say what they got
     elif "input" in first:

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
-from common.errors import ConfigError, quote
+from common.errors import ConfigError, did_you_mean, quote
 from common.readings import Readings
 from common.scenario import MAX_LENGTH, Scenario
 
@@ -66,7 +66,8 @@ def check_env_kwargs(env_kwargs: Mapping[str, Any], tier: str, source: str | Pat
     allowed = sorted((*(k for k in CONDITION_KEYS if k not in other_tier), *TASK_OPTIONS[tier]))
     for key in env_kwargs:
         if key not in allowed:
-            raise ConfigError(source, f"{field}.{key}", f"not a {tier} env argument; allowed: {', '.join(allowed)}")
+            raise ConfigError(source, f"{field}.{key}",
+                              f"not a {tier} env argument{did_you_mean(key, allowed)}; allowed: {', '.join(allowed)}")
     try:
         conditions = conditions_of(dict(env_kwargs), source, field).for_tier(tier)
         if "goal_threshold" in env_kwargs:

@@ -200,7 +200,13 @@ def parse_yaml(text: str, source: str | Path | None = None) -> Any:
         mark = getattr(exc, "problem_mark", None)
         # libyaml's scanner, reading ahead, may meet its own nesting limit (1000) before the composer meets ours.
         deep = "nesting depth" in str(getattr(exc, "problem", ""))
-        problem = f"nested deeper than {MAX_DEPTH} levels; refused" if deep else "not valid YAML"
+        # The parser's own reason says what to fix ("found character '\\t' that cannot start any token").
+        reason = " ".join(str(getattr(exc, "problem", "") or "").split())[:200]
+        lines = text.splitlines()
+        if mark is not None and mark.line < len(lines) and "\t" in lines[mark.line][:mark.column + 1]:
+            reason += " (a tab; YAML indents with spaces)"
+        problem = f"nested deeper than {MAX_DEPTH} levels; refused" if deep else \
+            "not valid YAML" + (f": {reason}" if reason else "")
         if isinstance(exc, yaml.constructor.ConstructorError) and "for the tag " in str(exc.problem):
             # A tag asks the reader to build an object (python/object, say): plain YAML only, nothing runs.
             tag = str(exc.problem).split("for the tag ", 1)[1].replace("tag:yaml.org,2002:", "!!")

@@ -21,10 +21,10 @@ BAD_FILES = {
     "unknown key": ("name: x\nwheels: 3\n", "wheels: unknown key; allowed: difficulty, goal, goal_threshold, grid_map"),
     "a misspelt key": ("name: x\nrobot: {v_maxx: 1}\n", "robot.v_maxx: unknown key (did you mean 'v_max'?); allowed: accel_lateral"),
     "unknown key of an obstacle": ("obstacles:\n  - {type: circle, x: 5, y: 5, radius: 1, colour: red}\n",
-                                   "obstacles.0.circle.colour: unknown key; allowed: height, motion, radius, type"),
+                                   "obstacles.0.colour: unknown key; allowed: height, motion, radius, type"),
     "an unknown key of a behaviour": (
         "obstacles:\n  - {type: circle, x: 5, y: 5, radius: 0.3, motion: {behavior: {name: dash, foo: 1}, goals: [[6, 6]]}}\n",
-        "obstacles.0.circle.motion.behavior.dash.foo: unknown key; allowed: angle_tolerance, name, yield_distance"),
+        "obstacles.0.motion.behavior.foo: unknown key; allowed: angle_tolerance, name, yield_distance"),
     "a boolean that is none": ("name: !!bool maybe\n", "line 1: 'maybe' is not a valid bool; refused"),
     "an integer that is none": ("world: {width: !!int 1x}\n", "line 1: '1x' is not a valid int"),
     "a sign for an integer": ("seed: !!int +\n", "line 1: '+' is not a valid int; refused"),
@@ -33,7 +33,7 @@ BAD_FILES = {
     "a tag that builds an object": ("!!python/object:os.system\nx: 1\n",
                                     "line 1: the tag '!!python/object:os.system' is refused; allowed: plain YAML"),
     "wrong type": ("world:\n  width: wide\n", "world.width: Input should be a valid number"),
-    "negative radius": ("obstacles:\n  - {type: circle, x: 5, y: 5, radius: -1}\n", "obstacles.0.circle.radius: Input should be greater than 0"),
+    "negative radius": ("obstacles:\n  - {type: circle, x: 5, y: 5, radius: -1}\n", "obstacles.0.radius: Input should be greater than 0"),
     "unknown obstacle type": ("obstacles:\n  - {type: blob, x: 5, y: 5}\n", "obstacles.0"),
     "empty file": ("", "the file is empty"),
     "not YAML": ("name: [unclosed\n  - {\n", "not valid YAML"),
@@ -251,6 +251,7 @@ def test_bench_gui_without_a_display_says_how_to_run_it(monkeypatch, capsys):
     (["render", "--agent", "teleport"], "--agent: 'teleport' is neither a controller (go_to_goal"),
     (["bench", "--steps", "lots"], "--steps: expected a whole number, got 'lots'"),
     (["fly"], "invalid choice: 'fly'"),
+    (["compare", "--env-kwargs", "lidar_nosie:0.02"], "got 'lidar_nosie:0.02' (did you mean 'lidar_noise'?)"),
 ])
 def test_bad_flags_and_missing_files_are_one_line_exit_2(argv, expected):
     result = subprocess.run([sys.executable, "-m", "common.curriculum.cli", *argv], capture_output=True, text=True)

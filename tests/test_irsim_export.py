@@ -76,12 +76,12 @@ def test_what_irsim_cannot_say_is_one_line():
         scenario_to_irsim(scenario.model_copy(update={"obstacles": [person(Orca(), reacts=True)]}))
     alone = person(Orca())
     alone = alone.model_copy(update={"motion": alone.motion.model_copy(update={"group": None})})
-    with pytest.raises(ConfigError, match="0.circle.motion.group: IR-SIM runs ORCA as a group behaviour only"):
+    with pytest.raises(ConfigError, match="0.motion.group: IR-SIM runs ORCA as a group behaviour only"):
         scenario_to_irsim(scenario.model_copy(update={"obstacles": [alone]}))
     with pytest.raises(ConfigError, match="IR-SIM's group behaviour has one set of parameters"):
         scenario_to_irsim(scenario.model_copy(update={"obstacles": [person(Sfm(vmax=1.0)), person(Sfm(vmax=2.0))]}))
     driver = CircleObstacle(x=5.0, y=5.0, radius=0.2, motion=Motion(behavior=Dash(yield_distance=1.0), goals=[(6.0, 5.0)]))
-    with pytest.raises(ConfigError, match="0.circle.motion.behavior.yield_distance: IR-SIM's dash never yields"):
+    with pytest.raises(ConfigError, match="0.motion.behavior.yield_distance: IR-SIM's dash never yields"):
         scenario_to_irsim(scenario.model_copy(update={"obstacles": [driver]}))
     blind = driver.model_copy(update={"motion": driver.motion.model_copy(update={"reacts_to_robot": False})})
     assert "yield_distance" not in str(scenario_to_irsim(scenario.model_copy(update={"obstacles": [blind]})))

@@ -198,16 +198,15 @@ def test_people_who_see_the_robot_go_round_it_and_blind_ones_walk_into_it(behavi
 
 
 @pytest.mark.parametrize(("motion", "message"), [
-    ({"goals": [[float("nan"), 1.0]]}, "obstacles.0.circle.motion.goals.0.0: Input should be a finite number"),
-    ({"goals": [[12.0, 1.0]]}, "obstacles.0.circle.motion.goals.0: (12, 1) lies outside the world"),
+    ({"goals": [[float("nan"), 1.0]]}, "obstacles.0.motion.goals.0.0: Input should be a finite number"),
+    ({"goals": [[12.0, 1.0]]}, "obstacles.0.motion.goals.0: (12, 1) lies outside the world"),
     ({"goals": [[2.0, 1.0]], "vel_max": [11.0, 1.0]},
-     "obstacles.0.circle.motion.vel_max.0: Input should be less than or equal to 10"),
+     "obstacles.0.motion.vel_max.0: Input should be less than or equal to 10"),
     ({"goals": [[2.0, 1.0]], "vel_min": [1.0, 0.0], "vel_max": [0.5, 1.0]}, "vel_min [1.0, 0.0] exceeds vel_max"),
     ({}, "a motion needs goals or a wander region"),
-    ({"wander": [5.0, 5.0, 11.0, 9.0]}, "obstacles.0.circle.motion.wander: [5.0, 5.0, 11.0, 9.0] reaches outside the world"),
+    ({"wander": [5.0, 5.0, 11.0, 9.0]}, "obstacles.0.motion.wander: [5.0, 5.0, 11.0, 9.0] reaches outside the world"),
     ({"goals": [[2.0, 1.0]], "behavior": {"name": "teleport"}},
-     "obstacles.0.circle.motion.behavior: Input tag 'teleport' found using 'name' does not match any of the expected "
-     "tags: 'dash', 'rvo', 'orca', 'sfm'"),
+     "obstacles.0.motion.behavior.name: 'teleport'; allowed: dash, rvo, orca, sfm"),
 ])
 def test_bad_motions_are_one_line_errors_naming_the_field(motion, message):
     data = {"obstacles": [{"type": "circle", "x": 5.0, "y": 5.0, "radius": 0.3, "motion": motion}]}

@@ -405,3 +405,28 @@ def test_a_boolean_where_a_number_belongs_is_refused_not_read_as_one_or_zero(tmp
                                      else text + "goal: [8, 8]\n")
     with pytest.raises(ConfigError, match=rf"s\.yaml: {re.escape(field)}: .*allowed: a number"):
         load_scenario(tmp_path / "s.yaml")
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("obstacles: [{x: 5, y: 5, radius: 0.5}]\n", "obstacles.0.type: missing; allowed: circle, box, polygon, segment"),
+    ("obstacles: [{type: cirle, x: 5, y: 5, radius: 0.5}]\n",
+     "obstacles.0.type: 'cirle' (did you mean 'circle'?); allowed: circle, box, polygon, segment"),
+    # pydantic puts the union member's tag in the path: no one wrote a key "box".
+    ("obstacles: [{type: box, x: 5, y: 5, width: 0.5}]\n", "obstacles.0.length: Field required"),
+    ("obstacles: [{type: circle, x: 5, y: 5, radius: 0.5, motion: {goals: [[1, 1]], behavior: {name: sfm, vmaxx: 1}}}]\n",
+     "obstacles.0.motion.behavior.vmaxx: unknown key (did you mean 'vmax'?); allowed: force_factor_desired"),
+    ("obstacles: [{type: circle, x: 5, y: 5, radius: 0.5, motion: {goals: [[1, 1]], behavior: {name: sfn}}}]\n",
+     "obstacles.0.motion.behavior.name: 'sfn' (did you mean 'sfm'?); allowed: dash, rvo, orca, sfm"),
+    ("goal: [9.0]\n", "goal: too few values (got [9.0]); item 1 is missing"),
+    ("robot:\n\tradius: 0.3\n", "line 4: not valid YAML: found character that cannot start any token (a tab; YAML "
+                                "indents with spaces)"),
+])
+def test_a_mistyped_scenario_is_told_in_the_words_of_its_file(tmp_path, text, expected):
+    from common.scenario import load_scenario
+
+    head = "start: [1, 1, 0]\n" if text.startswith("goal") else "start: [1, 1, 0]\ngoal: [8, 8]\n"
+    (tmp_path / "s.yaml").write_text(head + text)
+    with pytest.raises(ConfigError) as error:
+        load_scenario(tmp_path / "s.yaml")
+    assert str(error.value) == f"{tmp_path / 's.yaml'}: {expected}" or str(error.value).startswith(
+        f"{tmp_path / 's.yaml'}: {expected}"), str(error.value)

@@ -41,7 +41,7 @@ from common.conditions import Conditions
 from common.curriculum.hyperparams import OPTIMIZER_KERNELS, policy_kwargs_from_yaml, resolve_hyperparams
 from common.curriculum.policy_file import ALGORITHMS
 from common.drive import refuse_other_drives
-from common.errors import ConfigError, quote
+from common.errors import ConfigError, did_you_mean, quote
 from common.generators import KINDS, SUITES
 from common.observations import LAYOUTS
 from common.rewards import resolve_reward_spec
@@ -226,7 +226,8 @@ def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
     for key in stage.hyperparams:
         if key not in allowed:
             raise ConfigError(source, f"{field}.hyperparams.{key}",
-                              f"not a {stage.algorithm.upper()} argument; allowed: {', '.join(sorted(allowed))}")
+                              f"not a {stage.algorithm.upper()} argument{did_you_mean(key, sorted(allowed))}; "
+                              f"allowed: {', '.join(sorted(allowed))}")
     resolve_hyperparams(stage.hyperparams, source=source, field=f"{field}.hyperparams")
     if "policy_kwargs" in stage.hyperparams:
         kwargs = policy_kwargs_from_yaml(stage.hyperparams["policy_kwargs"], source, f"{field}.hyperparams.policy_kwargs")
