@@ -42,6 +42,17 @@ def test_a_dash_mover_moves_its_speed_once_a_step_until_it_arrives():
     assert np.all(steps[-5:] == 0.0)
 
 
+@pytest.mark.parametrize("kinematics", ["diff", "omni"])
+def test_an_rvo_mover_of_a_project_scenario_walks_to_its_goal(kinematics):
+    """Stepped in Python (IR-SIM's rvo), it indexed an IR-SIM world's polygons, which a project
+    world has none of: every command on the file ended in an IndexError."""
+    from common.motion.spec import Rvo
+
+    world = world_of(person(5.0, 3.0, [(5.0, 5.5)], speed=0.5, behavior=Rvo(), kinematics=kinematics))
+    path = positions(world, 80)
+    assert np.hypot(*(path[-1] - (5.0, 5.5))) < 0.2 < np.hypot(*(path[0] - (5.0, 5.5)))
+
+
 @pytest.mark.parametrize(("route", "visits"), [
     ("once", [(4, 5), (4, 8)]),
     ("loop", [(4, 5), (4, 8), (4, 5), (4, 8)]),

@@ -142,7 +142,7 @@ class MoverTable:
     labels: tuple[str, ...]
     obstacle_index: np.ndarray  # (N,): each mover's index in scenario.obstacles (-1: the controlled robot)
     irsim: bool  # whether discs are IR-SIM's polygons' (see the module)
-    outlines: np.ndarray  # (N, 65, 2): each mover's polygon at the origin, IR-SIM worlds only (OUTLINE rows)
+    outlines: np.ndarray  # (N, 65, 2): each mover's polygon at the origin in IR-SIM worlds (OUTLINE rows); (N, 0, 2) else
 
 
 _BEHAVIORS = {"dash": DASH, "rvo": RVO, "orca": ORCA, "sfm": SFM}
@@ -162,7 +162,7 @@ def mover_table(scenario: Scenario) -> MoverTable:
     capacity = max([2] + [len(r) + 1 for r in routes])
     floats, ints, params = [], [], []
     goals, route_table = np.zeros((n, capacity, 2)), np.zeros((n, capacity, 2))
-    outlines = np.zeros((n if irsim else 0, CIRCLE_VERTICES + 1, 2))
+    outlines = np.zeros((n, CIRCLE_VERTICES + 1 if irsim else 0, 2))  # (n, 0, 2): a row each, for move() to index
     groups: dict[str, int] = {}
     step_time = scenario.world.step_time
     for m, ((index, obstacle, motion), route) in enumerate(zip(entries, routes)):
