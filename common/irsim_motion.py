@@ -70,6 +70,10 @@ def read_motion(entry: Entry, path: str, rng: np.random.Generator, group: str, r
         "target_roles": Value(string(route_config.get("target_roles", "all"), join(route_path, "target_roles"),
                                      ("all", "robot", "obstacle")), join(route_path, "target_roles")),
     }
+    if name == "orca":
+        # IR-SIM's ORCA group (RVO2) plans among its members only: a controlled robot that is not
+        # one is not avoided (flatland's default has people see the robot).
+        fields["reacts_to_robot"] = Value(False, config_path)
     for key in ("vel_min", "vel_max", "acce", "velocity"):
         item = entry.get(key)
         if item is not None and item.value is not None:

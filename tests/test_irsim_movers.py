@@ -90,6 +90,24 @@ obstacle:
     assert_alike(ours, theirs, 1e-6)
 
 
+def test_an_orca_group_walks_past_a_robot_that_is_not_a_member_as_irsim_s_does(tmp_path):
+    """IR-SIM's ORCA (RVO2) plans among the group's members only; read as people who see the
+    robot, the pair swerved round it, 0.15 m from IR-SIM's paths by step 30."""
+    text = HEAD.format(mode="unobstructed").replace("state: [1, 1, 0]", "state: [3, 5, 0]") + """obstacle:
+  - number: 2
+    distribution: {name: manual}
+    kinematics: {name: omni}
+    shape: {name: circle, radius: 0.3}
+    state: [[4, 6.5, 0], [4.5, 3.5, 0]]
+    goal: [[4, 3.0, 0], [4.5, 7.0, 0]]
+    vel_max: [0.6, 0.6]
+    vel_min: [-0.6, -0.6]
+    group_behavior: {name: orca, neighborDist: 3.0, maxNeighbors: 5, timeHorizon: 3.0, timeHorizonObst: 3.0}
+"""
+    ours, theirs = run_both(tmp_path, text, 60, command=(0.0, 0.0))
+    assert_alike(ours, theirs, 1e-3)
+
+
 def test_the_robot_halts_on_a_mover_and_goes_on_when_it_has_passed(tmp_path):
     # unobstructed_obstacles: the robot stops while a person crossing its path touches it, the
     # person walks on, and the robot drives on once they no longer touch (IR-SIM judges a stop anew
