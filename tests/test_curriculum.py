@@ -486,3 +486,21 @@ def test_a_resumed_stage_logs_each_tensorboard_step_once(tmp_path):
     log(range(5, 13))  # the resumed run, from the checkpoint on
     steps = [event.step for event in EventAccumulator(str(tmp_path / "open_1")).Reload().Scalars("time/fps")]
     assert steps == list(range(1, 13))
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("start: [1, 1, 0]\ngoal: [8, 8]\nrobot: {shape: box, length: 0.5, width: 0.3, w_max: 1.5}\n",
+     {"shape": "box", "length": 0.5, "width": 0.3, "w_max": 1.5}),
+    ("world: {height: 10, width: 10}\nrobot:\n  kinematics: {name: diff}\n  shape: {name: circle, radius: 0.35}\n"
+     "  state: [1, 1, 0]\n  goal: [8, 8, 0]\n  vel_max: [0.8, 1.2]\n", {"shape": "circle", "radius": 0.35, "v_max": 0.8}),
+])
+def test_a_policy_trained_on_a_world_file_records_the_file_s_robot(tmp_path, text, expected):
+    """The manifest said the template's 0.2 m circle while the env drove the file's robot; a
+    deployment sets its robot from the manifest."""
+    from common.curriculum.stage import manifest_for
+
+    (tmp_path / "world.yaml").write_text(text)
+    data = _with({}, {"scenarios": {"file": "world.yaml"}, "normalize": False})
+    config = curriculum_from_mapping(data, tmp_path / "c.yaml")
+    robot = manifest_for(config, None, 0, 0, 0.0, None)["robot"]
+    assert {key: robot[key] for key in expected} == expected, robot

@@ -7,10 +7,13 @@ are the eval split, disjoint from the training scenarios, and the test draw neve
 
 from __future__ import annotations
 
+import warnings
+
 import common
 from common.conditions import conditions_of
 from common.curriculum.machine import machine
 from common.curriculum.schema import CurriculumConfig, StageSpec
+from common.errors import ScenarioWarning
 from common.generators import get_suite
 from common.task import judged_radius
 from common.observations import DEFAULT_GOAL_DISTANCE_SCALE
@@ -35,9 +38,17 @@ def stage_radius(stage: StageSpec) -> float | None:
 
 def training_robot(stage: StageSpec) -> RobotProfile:
     """The robot profile a stage trains with: its conditions' (the tier's default included), else
-    the generator template's."""
+    its world file's, else the generator template's."""
     profile = conditions_of(stage.env_kwargs).for_tier(stage.world).profile
-    return profile if profile is not None else Scenario().robot
+    if profile is not None:
+        return profile
+    if stage.scenarios.file is not None:  # the file's robot, which the env drives (a deployment reads it here)
+        from common.world_file import WorldFile
+
+        with warnings.catch_warnings():  # the file's warnings were given as the curriculum was read
+            warnings.simplefilter("ignore", ScenarioWarning)
+            return WorldFile(stage.scenarios.file).initial.robot
+    return Scenario().robot
 
 
 def manifest_for(config: CurriculumConfig, commit: str | None, index: int, timesteps: int, wall_time: float,
