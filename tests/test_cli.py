@@ -520,3 +520,24 @@ def test_render_index_draws_that_scenario_alone(from_file, tmp_path):
     all_five = _scenarios(args, count=5)
     assert [_scenarios(args, count=1, first=k)[0] for k in range(5)] == all_five
     assert len({s.model_dump_json() for s in all_five}) == 5, "the five draws must differ for the test to tell them apart"
+
+
+def test_a_world_no_tier_can_build_is_refused_by_validate_and_named_where_it_is_driven(tmp_path, capsys):
+    """validate said ok to a polygon robot among movers, which every command then refused; and a
+    refusal raised where a world is driven named no file."""
+    among = tmp_path / "among.yaml"
+    among.write_text("start: [1, 1, 0]\ngoal: [8, 8]\nrobot: {shape: polygon, vertices: [[0.2, 0], [-0.2, 0.15], "
+                     "[-0.2, -0.15]]}\nobstacles: [{type: circle, x: 5, y: 5, radius: 0.3, motion: {goals: [[6, 6]]}}]\n")
+    assert main(["validate", str(among)]) == 2
+    assert capsys.readouterr().err == f"error: {among}: robot.shape: a polygon robot among movers is not modelled; " \
+                                      "allowed: circle, box\n"
+    omni = tmp_path / "omni.yaml"
+    omni.write_text("start: [1, 1, 0]\ngoal: [8, 8]\nrobot: {kinematics: omni}\n")
+    assert main(["compare", "--controllers", "reactive", "--episodes", "1", "--scenario-file", str(omni),
+                 "--out", str(tmp_path / "c")]) == 2
+    # (after the line announcing the comparison: the controller refuses the robot as it is bound)
+    assert capsys.readouterr().err.splitlines()[-1].startswith(f"error: {omni}: robot.kinematics: the reactive "
+                                                                "controller drives")
+    # An error of a flag stays the flag's.
+    assert main(["compare", "--controllers", "teleport", "--scenario-file", str(omni), "--out", str(tmp_path / "d")]) == 2
+    assert capsys.readouterr().err.startswith("error: --controllers: controllers.teleport: unknown controller")

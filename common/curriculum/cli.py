@@ -50,7 +50,13 @@ def _validated(path: str) -> str:
             config = curriculum_from_mapping(data, path)
             line = f"ok: {path}: curriculum {config.name!r}, {_counted(len(config.stages), 'stage')}"
         else:
+            from common.motion.movers import refuse_unmodelled
+
             scenario = WorldFile(path).initial
+            try:  # no tier builds such a world: a file nothing can run is not ok
+                refuse_unmodelled(scenario)
+            except ConfigError as error:
+                raise error.with_source(path) from None
             line = f"ok: {path}: scenario {scenario.name!r}, {_counted(len(scenario.obstacles), 'obstacle')}"
     for warning in caught:
         if issubclass(warning.category, ScenarioWarning):
@@ -305,7 +311,7 @@ def _compare(args: argparse.Namespace) -> int:
     scenarios = _scenarios(args, conditions=conditions) if not args.scenario_file else scenarios
     source = Path(args.scenario_file).stem if args.scenario_file else args.suite
     out = _compare_directory(Path(args.out) if args.out else Path("runs") / "compare" / f"{args.world}-{source}")
-    _announce(args, f"{len(agents)} agents", len(scenarios), radius, conditions)
+    _announce(args, _counted(len(agents), "agent"), len(scenarios), radius, conditions)
     with Progress(transient=True, console=_stderr_console()) as bar:
         task = bar.add_task(f"{source}: {len(agents)} agents x {len(scenarios)} episodes", total=len(agents) * len(scenarios))
         summaries = evaluate(agents, scenarios, args.world, seed=args.seed, max_steps=args.max_steps,
@@ -590,8 +596,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return args.handler(args)
     except (ConfigError, OSError) as error:
-        print(_error_line(error), file=sys.stderr)
+        print(_error_line(_attributed(error, args)), file=sys.stderr)
         return EXIT_BAD_INPUT
+
+
+def _attributed(error: ConfigError | OSError, args: argparse.Namespace) -> ConfigError | OSError:
+    """A refusal of a field of the --scenario-file's world (its robot, its grid map), raised where
+    the world is built or driven, which knows no file: named with the file, as validation names it."""
+    scenario_file = getattr(args, "scenario_file", None)
+    if not isinstance(error, ConfigError) or error.source is not None or not scenario_file or not error.field:
+        return error
+    from common.scenario import Scenario
+
+    return error.with_source(scenario_file) if error.field.split(".")[0] in Scenario.model_fields else error
 
 
 def _error_line(error: ConfigError | OSError) -> str:
