@@ -150,8 +150,7 @@ def test_a_comparison_killed_while_writing_leaves_the_earlier_one_whole(tmp_path
         raise KeyboardInterrupt  # the chart is written last: the table and episodes are new by then
 
     monkeypatch.setattr(comparison, "bar_chart", killed)
-    with pytest.raises(KeyboardInterrupt):
-        main([*argv, "--controllers", "reactive"])
+    assert main([*argv, "--controllers", "reactive"]) == 130  # Ctrl-C, said in one line
     assert {p.name: p.read_bytes() for p in out.iterdir()} == earlier
     (out / ".comparison.md.x1y2.tmp").write_text("a kill -9 left this")  # not a reason to refuse the next one
     monkeypatch.undo()
@@ -203,3 +202,13 @@ def test_a_device_this_machine_lacks_is_refused_before_training(tmp_path, capsys
     assert not out.exists()
     with pytest.raises(ConfigError, match=f"device: '{device}', but torch finds no"):
         Runner(load_curriculum(curriculum), out, device=device)
+
+
+def test_ctrl_c_is_one_line_that_says_how_to_go_on(tmp_path, capsys, monkeypatch):
+    """It printed some fifty lines of KeyboardInterrupt traceback; --resume then worked."""
+    def interrupted(self):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(Runner, "run", interrupted)
+    assert main(["run", str(TINY), "--out", str(tmp_path / "run"), "--no-progress"]) == 130
+    assert capsys.readouterr().err == "interrupted; every checkpoint written so far is whole: continue with --resume\n"

@@ -21,6 +21,7 @@ if TYPE_CHECKING:
     from common.conditions import Conditions
 
 EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports a command Ctrl-C stopped
 
 
 def _validate(args: argparse.Namespace) -> int:
@@ -598,6 +599,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ConfigError, OSError) as error:
         print(_error_line(_attributed(error, args)), file=sys.stderr)
         return EXIT_BAD_INPUT
+    except KeyboardInterrupt:  # Ctrl-C: a stop the user asked for, not a crash to show a traceback of
+        resumable = args.handler in (_run, _sweep)
+        print("interrupted" + ("; every checkpoint written so far is whole: continue with --resume" if resumable
+                               else ""), file=sys.stderr)
+        return EXIT_INTERRUPTED
 
 
 def _attributed(error: ConfigError | OSError, args: argparse.Namespace) -> ConfigError | OSError:
