@@ -42,7 +42,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from common.drive import CHANNELS as DRIVE_CHANNELS, DEFAULT_NOISE
-from common.errors import ConfigError, quote
+from common.errors import ConfigError, did_you_mean, quote
 from common.grid_maps import GridMap, occupancy, resolve_image
 from common.irsim_values import (
     Entry,
@@ -757,7 +757,7 @@ def _parse(data: dict, source: str | Path | None, draws: _Draws) -> Scenario:
         data, prefix = mapping_of(data["irsim"], "irsim"), "irsim."
     for key in data:
         if key not in TOP_KEYS:
-            raise fail(f"{prefix}{key}", f"unknown key; allowed: {', '.join(TOP_KEYS)}")
+            raise fail(f"{prefix}{key}", f"unknown key{did_you_mean(key, TOP_KEYS)}; allowed: {', '.join(TOP_KEYS)}")
     reads = draws.reads
     world, name = reads.once("world", (data.get("world"),), lambda: _world(data.get("world"), f"{prefix}world"))
     grid_map = reads.once("grid map", (data.get("world"),),

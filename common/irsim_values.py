@@ -10,7 +10,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from pydantic import BaseModel, ValidationError
 
-from common.errors import ConfigError, quote
+from common.errors import ConfigError, did_you_mean, quote
 from common.scenario import pydantic_error
 
 
@@ -123,7 +123,7 @@ def mapping_of(value: Any, path: str) -> dict:
 def check_keys(mapping: dict, allowed: tuple[str, ...], path: str) -> None:
     for key in mapping:
         if key not in allowed:
-            raise fail(join(path, str(key)), f"unknown key; allowed: {', '.join(allowed)}")
+            raise fail(join(path, str(key)), f"unknown key{did_you_mean(key, allowed)}; allowed: {', '.join(allowed)}")
 
 
 def fit3(values: list[float]) -> tuple[float, float, float]:

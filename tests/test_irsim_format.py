@@ -379,7 +379,7 @@ def test_irsim_wrapper_and_world_file_entry_points(tmp_path):
 
 
 ERRORS = [
-    ("robots: {}\n", "robots", "unknown key; allowed: world, robot, obstacle, gui, custom"),
+    ("robots: {}\n", "robots", "unknown key (did you mean 'robot'?); allowed: world, robot, obstacle, gui, custom"),
     (ROBOT + "world: {size: 3}\n", "world.size", "unknown key; allowed: name, height"),
     (ROBOT + "world: {collision_mode: reactive}\n", "world.collision_mode", "allowed: stop"),
     (ROBOT + "world: {width: -1}\n", "world.width", "must be > 0"),
@@ -410,7 +410,7 @@ ERRORS = [
     (ROBOT + "  shape: {name: polygon, vertices: [[0, 0], [1, 1], [1, 0], [0, 1]]}\n", "robot", "crosses itself"),
     (ROBOT + "  shape: {name: circle, center: [0.1, 0.2]}\n", "robot.shape.center", "allowed: a centre [x, 0]"),
     (ROBOT + "  shape: {name: circle, size: 1}\n", "robot.shape.size", "unknown key"),
-    (ROBOT + "  colour: red\n", "robot.colour", "unknown key; allowed: shape, kinematics"),
+    (ROBOT + "  colour: red\n", "robot.colour", "unknown key (did you mean 'color'?); allowed: shape, kinematics"),
     (ROBOT + "  state: here\n", "robot.state", "expected a list"),
     (ROBOT + "  state: [1, x, 0]\n", "robot.state[1]", "expected a number"),
     (ROBOT + "  goal: []\n", "robot.goal", "expected a list"),
