@@ -17,6 +17,7 @@ from scipy import stats
 
 from common.curriculum.cli import main
 from common.curriculum.machine import describe, machine
+from common.errors import ConfigError
 from common.statistics import aggregate
 
 pytest.importorskip("ray")
@@ -254,3 +255,42 @@ def test_failed_trials_fail_the_sweep_which_names_them_and_still_reports_the_res
     assert report.count("| **failed** |") == 1
     # The same values proposed twice are two trials, each with a run directory of its own.
     assert sorted(p.name for p in (out / "trials").iterdir()) == sorted([failed, other["name"]])
+
+
+def test_a_resumed_sweep_holds_to_the_options_it_began_with(tmp_path, capsys):
+    """Tune restores the sweep it saved: --seeds 3 on a resumed sweep of 2 kept 2 seeds, silently."""
+    from common.curriculum.cli import main
+    from common.curriculum.sweep import OPTIONS_FILE, sweep_options
+
+    out = tmp_path / "sweep"
+    fresh = sweep_options(out, {"seeds": 2, "space": None, "trials": None, "metric": None}, resume=False)
+    assert fresh == {"seeds": 2, "space": None, "trials": 8, "metric": "success_rate"}
+    out.mkdir()
+    (out / OPTIONS_FILE).write_text(json.dumps(fresh))
+    given = {"seeds": None, "space": None, "trials": None, "metric": None}
+    assert sweep_options(out, given, resume=True) == fresh  # left out: as it began
+    assert sweep_options(out, {**given, "seeds": 2}, resume=True) == fresh  # the same: fine
+    assert main(["sweep", str(TINY), "--seeds", "3", "--out", str(out), "--resume"]) == 2
+    assert capsys.readouterr().err == ("error: --seeds: 3, but this sweep began with 2: a resume continues it as it "
+                                       "began (leave the option out, or choose another --out)\n")
+    (out / OPTIONS_FILE).write_text('{"seeds": 2}')
+    with pytest.raises(ConfigError, match="options.json: expected the options seeds, space, trials, metric"):
+        sweep_options(out, given, resume=True)
+
+
+def test_parameter_importance_is_not_drawn_when_every_trial_scored_the_same():
+    """PED-ANOVA split the importance equally (0.5 each) over trials that all scored 0.0."""
+    from matplotlib.figure import Figure
+
+    from common.curriculum.sweep_report import _importance
+
+    def trials(scores):
+        return [{"final": {"success_rate": score}, "params": {"stages.0.hyperparams.gamma": 0.9 + 0.01 * k,
+                                                              "stages.0.hyperparams.n_epochs": 1 + k % 3}}
+                for k, score in enumerate(scores)]
+
+    flat, varied = Figure().add_subplot(), Figure().add_subplot()
+    _importance(flat, trials([0.0] * 6), "success_rate")
+    assert not flat.patches and "no parameter importance" in flat.texts[0].get_text()
+    _importance(varied, trials([0.1, 0.9, 0.2, 0.8, 0.3, 0.7]), "success_rate")
+    assert len(varied.patches) == 2 and not varied.texts

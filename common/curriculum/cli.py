@@ -528,10 +528,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     sweep = commands.add_parser("sweep", help="a curriculum over seeds, or a search, as Ray Tune trials (local or a cluster)")
     sweep.add_argument("file", metavar="FILE.yaml")
-    sweep.add_argument("--seeds", type=whole_number(1, 1000), default=1, help="runs with seeds SEED + 1000·k (default 1)")
+    sweep.add_argument("--seeds", type=whole_number(1, 1000), help="runs with seeds SEED + 1000·k (default 1)")
     sweep.add_argument("--space", metavar="SPACE.yaml", help="a search space: dotted curriculum paths -> distributions")
-    sweep.add_argument("--trials", type=whole_number(1, 10_000), default=8, help="trials of a search (default 8)")
-    sweep.add_argument("--metric", default="success_rate", choices=["success_rate", "spl"], help="what a search maximises")
+    sweep.add_argument("--trials", type=whole_number(1, 10_000), help="trials of a search (default 8)")
+    sweep.add_argument("--metric", choices=["success_rate", "spl"], help="what a search maximises (default success_rate)")
     sweep.add_argument("--address", metavar="HOST:PORT", help="an existing Ray cluster (default: a local one, in-process)")
     sweep.add_argument("--cpus-per-trial", type=float, default=1.0, metavar="K", help="CPUs each trial holds (default 1)")
     sweep.add_argument("--max-failures", type=whole_number(0, 100), default=2, metavar="F",

@@ -40,6 +40,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from common.atomic import atomic_write
 from common.curriculum.sweep_report import METRICS, trial_name, write_results
 from common.errors import ConfigError, quote
 from common.yaml_io import read_yaml, read_yaml_mapping
@@ -241,8 +242,31 @@ def check_address(address: str, timeout: float = 3.0) -> None:
                           "start one with `ray start --head` or leave --address out to run locally") from None
 
 
-def run_sweep(source: str | Path, out: Path, seeds: int = 1, space: str | Path | None = None, trials: int = 8,
-              metric: str = "success_rate", address: str | None = None, cpus_per_trial: float = 1.0,
+OPTIONS_FILE = "options.json"  # what the sweep was asked to do, for a resume to hold to
+OPTION_DEFAULTS = {"seeds": 1, "space": None, "trials": 8, "metric": "success_rate"}
+
+
+def sweep_options(out: Path, given: dict[str, Any], resume: bool) -> dict[str, Any]:
+    """The options a sweep runs with: those given, defaults for the rest; resumed, those it began
+    with (read from :data:`OPTIONS_FILE`), an option given otherwise refused: Tune restores the
+    sweep it saved, and --seeds 3 on a sweep of 2 kept 2 seeds without a word."""
+    from common.files import read_json
+
+    path = out / OPTIONS_FILE
+    if resume and path.is_file():
+        recorded = read_json(path, 64 * 1024, "the options a sweep began with")
+        if not isinstance(recorded, dict) or set(recorded) != set(OPTION_DEFAULTS):
+            raise ConfigError(path, None, f"expected the options {', '.join(OPTION_DEFAULTS)}; not a sweep's options file")
+        for name, value in given.items():
+            if value is not None and value != recorded[name]:
+                raise ConfigError(None, f"--{name}", f"{quote(value)}, but this sweep began with {quote(recorded[name])}: a "
+                                  "resume continues it as it began (leave the option out, or choose another --out)")
+        return recorded
+    return {name: OPTION_DEFAULTS[name] if value is None else value for name, value in given.items()}
+
+
+def run_sweep(source: str | Path, out: Path, seeds: int | None = None, space: str | Path | None = None,
+              trials: int | None = None, metric: str | None = None, address: str | None = None, cpus_per_trial: float = 1.0,
               max_failures: int = 2, resume: bool = False, device: str | None = None,
               trainable: Callable[[dict], None] | None = None) -> dict[str, Any]:
     """Run the sweep (or continue an interrupted one) and write its results; return sweep.json's content.
@@ -252,6 +276,11 @@ def run_sweep(source: str | Path, out: Path, seeds: int = 1, space: str | Path |
     """
     from common.curriculum.schema import load_curriculum
 
+    out = Path(out).resolve()
+    given = {"seeds": seeds, "space": None if space is None else str(Path(space).resolve()), "trials": trials,
+             "metric": metric}
+    options = sweep_options(out, given, resume)
+    seeds, space, trials, metric = (options[name] for name in OPTION_DEFAULTS)
     if metric not in METRICS:
         raise ConfigError(None, "--metric", f"{metric!r}; allowed: {', '.join(METRICS)}")
     if not (isinstance(cpus_per_trial, (int, float)) and 0 < cpus_per_trial <= 1024):  # refuses NaN too
@@ -272,7 +301,6 @@ def run_sweep(source: str | Path, out: Path, seeds: int = 1, space: str | Path |
     from ray import tune
 
     curriculum = read_yaml(source)
-    out = Path(out).resolve()
     experiment = out / "ray"
     restore = resume and tune.Tuner.can_restore(str(experiment))
     if resume and not restore and not (out / "trials").is_dir():
@@ -308,6 +336,7 @@ def run_sweep(source: str | Path, out: Path, seeds: int = 1, space: str | Path |
                                               search_alg=OptunaSearch(seed=0),
                                               scheduler=ASHAScheduler(grace_period=2, reduction_factor=2))
             out.mkdir(parents=True, exist_ok=True)
+            atomic_write(out / OPTIONS_FILE, lambda tmp: tmp.write_text(json.dumps(options, indent=2) + "\n"))
             tuner = tune.Tuner(resources, param_space=param_space, tune_config=tune_config,
                                run_config=tune.RunConfig(name="ray", storage_path=str(out), verbose=0,
                                                          failure_config=tune.FailureConfig(max_failures=max_failures)))
@@ -317,4 +346,4 @@ def run_sweep(source: str | Path, out: Path, seeds: int = 1, space: str | Path |
         ray.shutdown()
 
     return write_results(out, grid, metric, address, concurrent, time.perf_counter() - began,
-                         searched=space is not None)
+                         searched=space is not None, resumed=resume)

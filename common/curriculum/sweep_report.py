@@ -77,12 +77,13 @@ def _curve(run_dir: str | None) -> list[tuple[int, float]]:
 
 
 def write_results(out: Path, grid, metric: str, address: str | None, concurrent: int, wall_seconds: float,
-                  searched: bool) -> dict[str, Any]:
+                  searched: bool, resumed: bool = False) -> dict[str, Any]:
+    """sweep.json, sweep.md and sweep.png; ``wall_seconds`` is this invocation's (``resumed``: since the resume)."""
     trials = sorted((_trial(result) for result in grid), key=lambda t: (t["seed"], json.dumps(t["params"], sort_keys=True)))
     done = [t for t in trials if t["final"] is not None]
     results = {
         "backend": "ray", "address": address or "local", "metric": metric, "concurrent_trials": concurrent,
-        "wall_seconds": round(wall_seconds, 1), "trials": trials,
+        "wall_seconds": round(wall_seconds, 1), "resumed": resumed, "trials": trials,
         "failed": [t["name"] for t in trials if t["status"] == "error"],
         "aggregate": {m: aggregate([t["final"][m] for t in done]) for m in METRICS},
     }
@@ -97,7 +98,8 @@ def write_results(out: Path, grid, metric: str, address: str | None, concurrent:
 
 def _markdown(results: dict[str, Any]) -> str:
     lines = [f"# Sweep ({results['backend']}, {results['address']})", "",
-             f"{len(results['trials'])} trials, {results['concurrent_trials']} at a time, {results['wall_seconds']:.0f} s.", ""]
+             f"{len(results['trials'])} trials, {results['concurrent_trials']} at a time, {results['wall_seconds']:.0f} s"
+             + (" since the sweep was resumed (the time before is not counted)." if results.get("resumed") else "."), ""]
     failed = [t for t in results["trials"] if t["status"] == "error"]
     if failed:
         lines += [f"**{len(failed)} of {len(results['trials'])} trials failed**; the aggregate is over the others:", ""]
@@ -167,6 +169,13 @@ def _importance(ax, trials: list[dict], metric: str) -> None:
     if len(done) < 2:
         ax.set_axis_off()
         return
+    if len({t["final"][metric] for t in done}) == 1:
+        # Every trial scored the same: no parameter explains a difference, and PED-ANOVA's equal
+        # shares (0.5 each for two) would read as a finding.
+        ax.set_axis_off()
+        ax.text(0.5, 0.5, f"every trial scored the same test {metric}:\nno parameter importance to show",
+                ha="center", va="center", fontsize=9, transform=ax.transAxes)
+        return
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     study = optuna.create_study(direction="maximize")
     keys = list(done[0]["params"])
@@ -181,7 +190,7 @@ def _importance(ax, trials: list[dict], metric: str) -> None:
         method, evaluator = "fANOVA", optuna.importance.FanovaImportanceEvaluator(seed=0)
     else:
         method, evaluator = "PED-ANOVA", optuna.importance.PedAnovaImportanceEvaluator()
-    with warnings.catch_warnings():  # e.g. PED-ANOVA's "importances will be equal" when every trial scored the same
+    with warnings.catch_warnings():  # the estimators' own notes on few trials
         warnings.simplefilter("ignore")
         importances = optuna.importance.get_param_importances(study, evaluator=evaluator)
     names = list(importances)
