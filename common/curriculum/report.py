@@ -17,7 +17,7 @@ def learning_curve(eval_csv: Path, path: Path) -> Path:
     """Validation success rate and SPL against timesteps, one line per stage."""
     with eval_csv.open(newline="") as handle:
         rows = list(csv.DictReader(handle))
-    figure = Figure(figsize=(7, 4), dpi=100)
+    figure = Figure(figsize=(8, 4), dpi=100)
     FigureCanvasAgg(figure)
     ax = figure.add_subplot(1, 1, 1)
     offset = 0
@@ -31,7 +31,7 @@ def learning_curve(eval_csv: Path, path: Path) -> Path:
     ax.set_ylim(0, 1.02)
     ax.set_ylabel("validation rate")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc="lower right")
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))  # beside the axes: over them it hid points
     figure.tight_layout()
     figure.savefig(path)
     return path
