@@ -20,11 +20,17 @@ from common.robots import footprint_reach
 from common.rewards import Reward, StepContext
 from common.route import Route
 from common.conditions import Conditions
-from common.errors import ConfigError
+from common.errors import ConfigError, quote
 from common.scenario import Scenario
 from common.sources import ScenarioSource
 from common.task import DEFAULT_MAX_STEPS, GoalThreshold, Task
 from common.tiers import WorldLike, tier_source
+
+
+def require_flag(name: str, value: Any) -> None:
+    """A one-line error unless ``value`` is true or false: "false", a non-empty string, is truthy."""
+    if not isinstance(value, bool):
+        raise ConfigError(None, name, f"got {quote(value)}; allowed: true or false")
 
 
 class NavigationEnv(gym.Env):
@@ -51,6 +57,7 @@ class NavigationEnv(gym.Env):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode {render_mode!r}; allowed: None, {', '.join(self.metadata['render_modes'])}")
         self.render_mode = render_mode
+        require_flag("resample", resample)
         # Every other keyword is a condition knob (common.conditions), validated there by name.
         self.conditions = Conditions.parse({k: v for k, v in conditions.items() if v is not None}).for_tier(self.tier)
         self.source = tier_source(self.tier, world, difficulty, self.conditions, template, resample)

@@ -47,6 +47,8 @@ class NavEnv(NavigationEnv):
     Terminated when the goal is within ``goal_threshold`` (``info["is_success"]``) or the robot
     touches an obstacle or wall (``info["collided"]``: a crash is terminal, not a truncation).
     Truncated after ``max_steps`` steps (default 500).
+    A step that arrives and touches at once is a success (``is_success`` and ``collided`` both
+    true, as the evaluator counts it) and its reward holds both the goal and the collision terms.
 
     ## Arguments
     ``gymnasium.make("flatland/Nav-v0", world="sparse", observation="nav7", reward="default",
@@ -63,8 +65,9 @@ class NavEnv(NavigationEnv):
       drawn per episode from the env's seed (``info["goal_threshold"]`` at reset).
     * ``resample``: redraw a random IR-SIM world file every episode instead of restoring its
       initial state; ``reset(options={"resample": True})`` redraws once.
-    * ``**conditions``: the knobs of :mod:`common.conditions` (``robot``, ``lidar_noise``,
-      ``odometry_noise``, ``action_delay``, ``motor_scale``, ``dynamics``), flatland's defaults
+    * ``**conditions``: the knobs of :mod:`common.conditions` (``robot``, ``robot_family``,
+      ``lidar_beams``, ``lidar_noise``, ``odometry_noise``, ``action_delay``, ``motor_scale``,
+      ``dynamics``), flatland's defaults
       (an ideal robot) where unset.
 
     ## Example

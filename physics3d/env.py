@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from common.nav_env import NavigationEnv
+from common.nav_env import NavigationEnv, require_flag
 from common.observations import ObservationLayout
 from common.readings import Readings
 from common.route import Route
@@ -83,6 +83,8 @@ class WarehouseNavEnv(NavigationEnv):
     Terminated when the goal is within ``goal_threshold`` (``info["is_success"]``) or the robot
     touches anything but the floor (``info["collided"]``: a crash is terminal, not a truncation).
     Truncated after ``max_steps`` steps (default 500).
+    A step that arrives and touches at once is a success (``is_success`` and ``collided`` both
+    true, as the evaluator counts it) and its reward holds both the goal and the collision terms.
 
     ## Arguments
     ``gymnasium.make("physics3d/WarehouseNav-v0", world="warehouse", observation="lidar43",
@@ -90,13 +92,14 @@ class WarehouseNavEnv(NavigationEnv):
     template=None, action_mapping="linear", camera=False, resample=False, goal_threshold=None, **conditions)``
 
     * ``world``: a :class:`Scenario`, a list of them, a generator kind (``open``, ``sparse``, ``cluttered``,
-      ``warehouse``, ``trap``, ``maze``, ``passages``, ``crowd``, ``warehouse_moving``), a mix of kinds by
+      ``warehouse``, ``trap``, ``passages``, ``crowd``, ``warehouse_moving``; not ``maze``, a grid map), a mix of kinds by
       weight, or the path of a scenario or IR-SIM world YAML (extruded to 3D).
     * ``render_mode``: ``None`` (headless), ``"human"`` (the PyBullet GUI with RGB, depth and
       segmentation previews, paced to real time) or ``"rgb_array"`` (a chase camera, 480 x 360).
     * ``difficulty``: 0 to 1, for generator kinds; ``template``: the robot, lidar and world size
       the generator uses (default ``physics3d.robot.TEMPLATE``).
-    * ``camera``: add the camera images to the observation (about 10 ms a frame headless).
+    * ``camera``: add the camera images to the observation (true or false; a frame costs about
+      28 ms of CPU headless: ``camera_fps`` in docs/benchmarks.md).
     * ``goal_threshold``: None (each scenario's goal radius), a radius in metres, or ``[low, high]``
       drawn per episode from the env's seed (``info["goal_threshold"]`` at reset).
     * ``resample``: redraw a random IR-SIM world file every episode instead of restoring its
@@ -116,6 +119,7 @@ class WarehouseNavEnv(NavigationEnv):
 
     def __init__(self, world: Any = "warehouse", observation: str = "lidar43", reward: Any = "default",
                  template: Scenario | None = None, camera: bool = False, **kwargs: Any) -> None:
+        require_flag("camera", camera)  # camera="false" turned the camera on
         self.camera = camera
         self._chase: ChaseCamera | None = None
         self._overlay: GuiOverlay | None = None
