@@ -28,6 +28,12 @@ def did_you_mean(given: object, allowed: Iterable[str]) -> str:
     return f" (did you mean {close[0]!r}?)" if close else ""
 
 
+def require_flag(name: str, value: Any, source: str | Path | None = None) -> None:
+    """A one-line error unless ``value`` is true or false: "false", a non-empty string, is truthy."""
+    if not isinstance(value, bool):
+        raise ConfigError(source, name, f"got {quote(value)}; allowed: true or false")
+
+
 class ScenarioWarning(UserWarning):
     """A world file that runs, but probably not as its author meant (IR-SIM runs such files too)."""
 

@@ -20,17 +20,11 @@ from common.robots import footprint_reach
 from common.rewards import Reward, StepContext
 from common.route import Route
 from common.conditions import Conditions
-from common.errors import ConfigError, quote
+from common.errors import ConfigError, require_flag
 from common.scenario import Scenario
 from common.sources import ScenarioSource
 from common.task import DEFAULT_MAX_STEPS, GoalThreshold, Task
 from common.tiers import WorldLike, tier_source
-
-
-def require_flag(name: str, value: Any) -> None:
-    """A one-line error unless ``value`` is true or false: "false", a non-empty string, is truthy."""
-    if not isinstance(value, bool):
-        raise ConfigError(None, name, f"got {quote(value)}; allowed: true or false")
 
 
 class NavigationEnv(gym.Env):
@@ -124,7 +118,9 @@ class NavigationEnv(gym.Env):
         super().reset(seed=seed)
         if self._pending_rng is not None:
             self.np_random.bit_generator.state, self._pending_rng = self._pending_rng, None
-        drawn = self.source.draw(self.np_random, resample=bool((options or {}).get("resample", False)))
+        resample = (options or {}).get("resample", False)
+        require_flag('options["resample"]', resample)  # "no" read as true
+        drawn = self.source.draw(self.np_random, resample=resample)
         if drawn is not self._drawn:
             self._load(drawn)
         scenario = self.scenario

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
-from common.errors import ConfigError, did_you_mean, quote
+from common.errors import ConfigError, did_you_mean, quote, require_flag
 from common.readings import Readings
 from common.scenario import MAX_LENGTH, Scenario
 
@@ -72,10 +72,12 @@ def check_env_kwargs(env_kwargs: Mapping[str, Any], tier: str, source: str | Pat
         conditions = conditions_of(dict(env_kwargs), source, field).for_tier(tier)
         if "goal_threshold" in env_kwargs:
             threshold_range(env_kwargs["goal_threshold"])
-    except ConfigError as error:
-        raise ConfigError(source, error.field if error.source else f"{field}.{error.field}", error.problem) from None
-    if "resample" in env_kwargs and not isinstance(env_kwargs["resample"], bool):
-        raise ConfigError(source, f"{field}.resample", f"got {quote(env_kwargs['resample'])}; allowed: true or false")
+    except ConfigError as error:  # named once: the conditions' own errors start with the field already
+        named = error.field if (error.field or "").startswith(field) else f"{field}.{error.field}"
+        raise ConfigError(source, named, error.problem) from None
+    for flag in ("resample", "camera"):
+        if flag in env_kwargs:
+            require_flag(f"{field}.{flag}", env_kwargs[flag], source)
     return conditions
 
 

@@ -7,7 +7,8 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from common.nav_env import NavigationEnv, require_flag
+from common.errors import require_flag
+from common.nav_env import NavigationEnv
 from common.observations import ObservationLayout
 from common.readings import Readings
 from common.route import Route

@@ -188,6 +188,7 @@ def test_a_pickle_in_place_of_weights_is_refused_without_running(untrained_polic
     (lambda m: m.update(tier="physics3d", env_kwargs={"robot_family": True}),
      "env_kwargs: robot_family: not a physics3d env argument"),
     (lambda m: m.update(env_kwargs={"resample": "yes"}), "env_kwargs: resample: got 'yes'; allowed: true or false"),
+    (lambda m: m.update(env_kwargs={"lidar_noise": -1}), "nav_manifest.json: env_kwargs: lidar_noise: "),  # named once
 ])
 @pytest.mark.parametrize("command", ["eval", "export"])
 def test_an_inconsistent_manifest_is_a_one_line_refusal(untrained_policy, tmp_path, capsys, change, expected, command):
