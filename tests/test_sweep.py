@@ -121,6 +121,10 @@ def test_trials_run_at_the_niceness_of_the_user_who_started_them(tmp_path, monke
     results = run_sweep(TINY, out, seeds=1, trainable=record_niceness)
     assert results["trials"][0]["status"] == "done"
     assert int((out / "niceness-seed0").read_text()) == os.getpriority(os.PRIO_PROCESS, 0)
+    # What a resume holds to, recorded as the sweep began; the time is this command's.
+    assert json.loads((out / "options.json").read_text()) == {"seeds": 1, "space": None, "trials": 8,
+                                                               "metric": "success_rate"}
+    assert results["resumed"] is False
 
 
 @pytest.mark.slow
@@ -259,7 +263,6 @@ def test_failed_trials_fail_the_sweep_which_names_them_and_still_reports_the_res
 
 def test_a_resumed_sweep_holds_to_the_options_it_began_with(tmp_path, capsys):
     """Tune restores the sweep it saved: --seeds 3 on a resumed sweep of 2 kept 2 seeds, silently."""
-    from common.curriculum.cli import main
     from common.curriculum.sweep import OPTIONS_FILE, sweep_options
 
     out = tmp_path / "sweep"
@@ -273,9 +276,12 @@ def test_a_resumed_sweep_holds_to_the_options_it_began_with(tmp_path, capsys):
     assert main(["sweep", str(TINY), "--seeds", "3", "--out", str(out), "--resume"]) == 2
     assert capsys.readouterr().err == ("error: --seeds: 3, but this sweep began with 2: a resume continues it as it "
                                        "began (leave the option out, or choose another --out)\n")
-    (out / OPTIONS_FILE).write_text('{"seeds": 2}')
-    with pytest.raises(ConfigError, match="options.json: expected the options seeds, space, trials, metric"):
-        sweep_options(out, given, resume=True)
+    for bad, expected in (('{"seeds": 2}', "space: Field required"),
+                          ('{"seeds": 1e9, "space": null, "trials": 8, "metric": "spl"}', "seeds: Input should be a valid integer"),
+                          ('{"seeds": 100000, "space": null, "trials": 8, "metric": "spl"}', "seeds: Input should be less than")):
+        (out / OPTIONS_FILE).write_text(bad)  # a shared run directory: its seeds drive a loop
+        with pytest.raises(ConfigError, match=f"options.json: {expected}"):
+            sweep_options(out, given, resume=True)
 
 
 def test_parameter_importance_is_not_drawn_when_every_trial_scored_the_same():

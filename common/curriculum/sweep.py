@@ -36,9 +36,10 @@ import shutil
 import socket
 import time
 from pathlib import Path
-from typing import Any, Callable
+from typing import Annotated, Any, Callable, Literal
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
 
 from common.atomic import atomic_write
 from common.curriculum.sweep_report import METRICS, trial_name, write_results
@@ -246,17 +247,34 @@ OPTIONS_FILE = "options.json"  # what the sweep was asked to do, for a resume to
 OPTION_DEFAULTS = {"seeds": 1, "space": None, "trials": 8, "metric": "success_rate"}
 
 
+class SweepOptions(BaseModel):
+    """:data:`OPTIONS_FILE`'s content, within the command line's ranges."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+
+    seeds: Annotated[int, Field(ge=1, le=1000)]
+    space: Annotated[str, Field(max_length=4096)] | None
+    trials: Annotated[int, Field(ge=1, le=10_000)]
+    metric: Literal[METRICS]  # type: ignore[valid-type]
+
+
 def sweep_options(out: Path, given: dict[str, Any], resume: bool) -> dict[str, Any]:
     """The options a sweep runs with: those given, defaults for the rest; resumed, those it began
     with (read from :data:`OPTIONS_FILE`), an option given otherwise refused: Tune restores the
     sweep it saved, and --seeds 3 on a sweep of 2 kept 2 seeds without a word."""
     from common.files import read_json
 
+    from pydantic import ValidationError
+
+    from common.scenario import pydantic_error
+
     path = out / OPTIONS_FILE
     if resume and path.is_file():
-        recorded = read_json(path, 64 * 1024, "the options a sweep began with")
-        if not isinstance(recorded, dict) or set(recorded) != set(OPTION_DEFAULTS):
-            raise ConfigError(path, None, f"expected the options {', '.join(OPTION_DEFAULTS)}; not a sweep's options file")
+        data = read_json(path, 64 * 1024, "the options a sweep began with")
+        try:  # checked as the command line checks them: a run directory is shared, and seeds drive a loop
+            recorded = SweepOptions.model_validate(data).model_dump()
+        except ValidationError as exc:
+            raise pydantic_error(path, exc, SweepOptions) from None
         for name, value in given.items():
             if value is not None and value != recorded[name]:
                 raise ConfigError(None, f"--{name}", f"{quote(value)}, but this sweep began with {quote(recorded[name])}: a "
