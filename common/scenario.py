@@ -40,6 +40,7 @@ from common.fields import (  # noqa: F401  (re-exported: the scenario's caps and
     NonNegativeLength,
     Number,
     Point,
+    Whole,
     Speed,
 )
 from common.grid_maps import GridMap, occupied_boxes, occupancy
@@ -358,7 +359,7 @@ class LidarSpec(Frozen):
     ends, so its ±π beam is read twice): IR-SIM world files set it, for parity with IR-SIM.
     """
 
-    beams: Annotated[int, Field(ge=1, le=4096)] = 36
+    beams: Annotated[Whole, Field(ge=1, le=4096)] = 36
     range_min: NonNegativeLength = 0.0
     range_max: Length = 5.0
     angle_range: Annotated[Number, Field(gt=0.0, le=2.0 * math.pi + 1e-9)] = 2.0 * math.pi
@@ -599,20 +600,23 @@ def _models_at(model: type[BaseModel], path: Sequence[Any]) -> list[type[BaseMod
 
 def _walk(model: type[BaseModel], path: Sequence[Any]) -> tuple[list[type[BaseModel]], list[Any]]:
     """:func:`_models_at`, and ``path`` without the tagged unions' member tags pydantic puts in it
-    (``obstacles.0.circle.radius``: no one wrote a key ``circle``)."""
-    models, tag, written = [model], "type", []
+    (``obstacles.0.circle.radius``: no one wrote a key ``circle``). A tag stands right after the
+    field holding the union (or its list index); a key spelt like a tag anywhere else is a key."""
+    models, tag, written, union = [model], "type", [], False
     for part in path:
         if isinstance(part, int):
             written.append(part)
             continue  # a list's item: its models are already the field's
+        members = [m for m in models if tag in m.model_fields and m.model_fields[tag].default == part] if union else []
+        union = False
+        if members:  # a tagged union's member: the one whose tag field holds that tag
+            models = members
+            continue
         held = [m.model_fields[part] for m in models if part in m.model_fields]
-        members = [m for m in models if tag in m.model_fields and m.model_fields[tag].default == part]
         if held:
             models = [inner for info in held for inner in _models_in(info.annotation)]
             tag = next((info.discriminator for info in held if isinstance(info.discriminator, str)), "type")
-        elif members:  # a tagged union's member: the one whose tag field holds that tag
-            models = members
-            continue
+            union = len(models) > 1
         else:
             models = []  # a key no model has (an unknown one), or one inside a plain value
         written.append(part)
@@ -640,7 +644,7 @@ def pydantic_error(source: str | Path | None, error: ValidationError, model: typ
         # pydantic's wording ("Unable to extract tag using discriminator") named no key a person wrote.
         key = first["ctx"]["discriminator"].strip("'")
         tags = [m.model_fields[key].default for m in _models_at(model, raw) if key in m.model_fields] if model else []
-        given = first["ctx"].get("tag")
+        given = first["input"].get(key) if isinstance(first["input"], dict) else first["ctx"].get("tag")
         field = f"{field}.{key}" if field else key
         message = "missing" if given is None else quote(given) + did_you_mean(given, tags)
         message += f"; allowed: {', '.join(tags)}" if tags else ""
