@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, Protocol
 
 from common.conditions import Conditions
@@ -70,7 +71,7 @@ def tier_source(tier: str, world: WorldArgument, difficulty: float, conditions: 
     from common.generators import KINDS
     from common.sources import scenario_source
 
-    kinds = [world] if isinstance(world, str) else list(world) if isinstance(world, dict) else []
+    kinds = [world] if isinstance(world, str) else list(world) if isinstance(world, Mapping) else []
     if unbuilt := [kind for kind in kinds if kind in UNBUILT_KINDS.get(tier, ())]:
         # Refused now: a mix drew it only after some resets, mid-training.
         built = [kind for kind in KINDS if kind not in UNBUILT_KINDS[tier]]

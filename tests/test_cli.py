@@ -538,6 +538,11 @@ def test_a_world_no_tier_can_build_is_refused_by_validate_and_named_where_it_is_
     # (after the line announcing the comparison: the controller refuses the robot as it is bound)
     assert capsys.readouterr().err.splitlines()[-1].startswith(f"error: {omni}: robot.kinematics: the reactive "
                                                                 "controller drives")
-    # An error of a flag stays the flag's.
+    # An error of a flag stays the flag's, and so does one of the robot --env-kwargs put in.
     assert main(["compare", "--controllers", "teleport", "--scenario-file", str(omni), "--out", str(tmp_path / "d")]) == 2
     assert capsys.readouterr().err.startswith("error: --controllers: controllers.teleport: unknown controller")
+    small = tmp_path / "small.yaml"
+    small.write_text("world: {width: 3, height: 3}\nstart: [1, 1, 0]\ngoal: [2, 2]\n")
+    assert main(["compare", "--controllers", "go_to_goal", "--episodes", "1", "--scenario-file", str(small),
+                 "--env-kwargs", "robot:{radius: 2.5}", "--out", str(tmp_path / "e")]) == 2
+    assert capsys.readouterr().err.splitlines()[-1].startswith("error: robot: 5 m across, it does not fit")

@@ -62,6 +62,9 @@ def _with(change: dict, stage: dict | None = None) -> dict:
      "not a flatland env argument (did you mean 'goal_threshold'?); allowed: action_delay"),
     (_with({}, {"hyperparams": {"nsteps": 64}}), "stages.0.hyperparams.nsteps",
      "not a PPO argument (did you mean 'n_steps'?); allowed: batch_size"),
+    (_with({}, {"world": "physics3d", "observation": "lidar43", "normalize": False, "env_kwargs": {"camera": "false"}}),
+     "stages.0.env_kwargs.camera", "got 'false'; allowed: true or false"),
+    (_with({}, {"env_kwargs": {"lidar_noise": -1}}), "stages.0.env_kwargs.lidar_noise", "greater than or equal to 0"),
     (_with({}, {"scenarios": {"mix": {}}}), "stages.0.scenarios", "mix names no kind; allowed: a weight for one or more of open"),
     (_with({}, {"scenarios": {"file": "/"}}), "stages.0.scenarios.file", "a directory, not a file: '/'; allowed: a scenario"),
     (_with({}, {"eval": {"suite": "sparse", "episodes": 10**9}}), "stages.0.eval.episodes", "less than or equal to 1000000"),
@@ -134,6 +137,9 @@ def test_a_world_file_given_as_a_curriculum_is_named_for_what_it_is(data, what):
         curriculum_from_mapping(data, "w.yaml")
     assert str(error.value) == (f"w.yaml: {what}, not a curriculum (it has no stages); "
                                 "try it with: curriculum compare --scenario-file FILE")
+    with pytest.raises(ConfigError) as error:  # a curriculum's own keys (name, seed) do not make a scenario
+        curriculum_from_mapping({"name": "x", "seed": 0, "stage": []}, "w.yaml")
+    assert "not a curriculum" not in str(error.value)
 
 
 def _movers_on_a_maze() -> str:

@@ -156,6 +156,11 @@ def test_a_comparison_killed_while_writing_leaves_the_earlier_one_whole(tmp_path
     monkeypatch.undo()
     assert main([*argv, "--controllers", "reactive"]) == 0
     assert "reactive" in (out / "comparison.md").read_text() and "reactive" in (out / "episodes.csv").read_text()
+    assert sorted(p.name for p in out.iterdir()) == ["comparison.md", "comparison.png", "episodes.csv"]  # cleared
+    (out / "episodes.csv").unlink()
+    (out / "episodes.csv").mkdir()  # a folder under a comparison's name: the user's, and the set's renames would stop
+    assert main([*argv, "--controllers", "reactive"]) == 2
+    assert "holds files other than a comparison's" in capsys.readouterr().err
 
 
 def test_render_to_a_directory_is_one_line(tmp_path, capsys):
@@ -210,5 +215,14 @@ def test_ctrl_c_is_one_line_that_says_how_to_go_on(tmp_path, capsys, monkeypatch
         raise KeyboardInterrupt
 
     monkeypatch.setattr(Runner, "run", interrupted)
+    assert main(["run", str(TINY), "--out", str(tmp_path / "run"), "--no-progress"]) == 130
+    assert capsys.readouterr().err == "interrupted\n"  # before the run directory held a state to resume
+
+    def interrupted_once_prepared(self):
+        self.prepare()
+        self.release()
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(Runner, "run", interrupted_once_prepared)
     assert main(["run", str(TINY), "--out", str(tmp_path / "run"), "--no-progress"]) == 130
     assert capsys.readouterr().err == "interrupted; every checkpoint written so far is whole: continue with --resume\n"

@@ -76,6 +76,11 @@ def _run(args: argparse.Namespace) -> int:
     device = resolve_device(args.device, None, "--device") if args.device else resolve_device(config.device, args.file)
     try:
         state = Runner(config, out, resume=args.resume, device=device, progress=not args.no_progress).run()
+    except KeyboardInterrupt:
+        if not (out / "state.json").exists():
+            raise
+        print("interrupted; every checkpoint written so far is whole: continue with --resume", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except OSError as error:
         raise ConfigError(error.filename or out, None, f"{error.strerror or error}; every checkpoint written so far is "
                           f"whole: once this is fixed, continue with --resume") from None
@@ -344,10 +349,14 @@ def _compare_directory(out: Path) -> Path:
     replaces); anything else is refused before a file is written."""
     if out.exists() and not out.is_dir():
         raise ConfigError(out, None, "is not a directory; --out names the comparison's directory")
-    if out.is_dir() and any(p.name not in COMPARE_FILES and not is_temporary_of(p.name, COMPARE_FILES)
-                            for p in out.iterdir()):
+    held = list(out.iterdir()) if out.is_dir() else []
+    # A comparison's files, or temporaries a killed one left: anything else, even a folder under
+    # one of their names, is the user's (and would stop the set's renames halfway).
+    if any(not p.is_file() or (p.name not in COMPARE_FILES and not is_temporary_of(p.name, COMPARE_FILES)) for p in held):
         raise ConfigError(out, None, f"holds files other than a comparison's ({', '.join(COMPARE_FILES)}); "
                           "choose an empty or a new --out (nothing was changed)")
+    for leftover in (p for p in held if is_temporary_of(p.name, COMPARE_FILES)):
+        leftover.unlink()
     out.mkdir(parents=True, exist_ok=True)
     return out
 
@@ -600,21 +609,25 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(_error_line(_attributed(error, args)), file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:  # Ctrl-C: a stop the user asked for, not a crash to show a traceback of
-        resumable = args.handler in (_run, _sweep)
-        print("interrupted" + ("; every checkpoint written so far is whole: continue with --resume" if resumable
-                               else ""), file=sys.stderr)
+        print("interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
 
 
-def _attributed(error: ConfigError | OSError, args: argparse.Namespace) -> ConfigError | OSError:
-    """A refusal of a field of the --scenario-file's world (its robot, its grid map), raised where
-    the world is built or driven, which knows no file: named with the file, as validation names it."""
-    scenario_file = getattr(args, "scenario_file", None)
-    if not isinstance(error, ConfigError) or error.source is not None or not scenario_file or not error.field:
-        return error
-    from common.scenario import Scenario
+# Refusals of a world's own robot and map, raised where the world is built or driven, which knows
+# no file: a controller refusing its kinematics, movers the motion code cannot model.
+_WORLD_REFUSALS = ("robot.kinematics", "robot.shape", "grid_map")
 
-    return error.with_source(scenario_file) if error.field.split(".")[0] in Scenario.model_fields else error
+
+def _attributed(error: ConfigError | OSError, args: argparse.Namespace) -> ConfigError | OSError:
+    """A refusal of the --scenario-file world's own robot or map, named with the file as validation
+    names it; not when --env-kwargs put in another robot (the refusal may be of that one)."""
+    scenario_file = getattr(args, "scenario_file", None)
+    if not isinstance(error, ConfigError) or error.source is not None or not scenario_file:
+        return error
+    replaced = "robot" in dict(getattr(args, "env_kwargs", None) or [])
+    if error.field not in _WORLD_REFUSALS or (replaced and error.field.startswith("robot")):
+        return error
+    return error.with_source(scenario_file)
 
 
 def _error_line(error: ConfigError | OSError) -> str:

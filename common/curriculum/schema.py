@@ -294,7 +294,8 @@ def world_file_format(data: dict) -> str | None:
 
     if irsim_mark(data) is not None:
         return "an IR-SIM world file"
-    return "a scenario" if (set(Scenario.model_fields) - {"name"}) & data.keys() else None
+    # Keys a curriculum has too (name, seed) tell nothing: a curriculum with a misspelt stages has them.
+    return "a scenario" if (set(Scenario.model_fields) - set(CurriculumConfig.model_fields)) & data.keys() else None
 
 
 def is_curriculum(data: dict) -> bool:

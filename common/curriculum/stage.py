@@ -7,6 +7,7 @@ are the eval split, disjoint from the training scenarios, and the test draw neve
 
 from __future__ import annotations
 
+import functools
 import warnings
 
 import common
@@ -43,12 +44,19 @@ def training_robot(stage: StageSpec) -> RobotProfile:
     if profile is not None:
         return profile
     if stage.scenarios.file is not None:  # the file's robot, which the env drives (a deployment reads it here)
-        from common.world_file import WorldFile
-
-        with warnings.catch_warnings():  # the file's warnings were given as the curriculum was read
-            warnings.simplefilter("ignore", ScenarioWarning)
-            return WorldFile(stage.scenarios.file).initial.robot
+        return _file_robot(stage.scenarios.file)
     return Scenario().robot
+
+
+@functools.lru_cache(maxsize=16)
+def _file_robot(path: str) -> RobotProfile:
+    """A world file's robot, read once a process: every checkpoint's manifest asks, and a file
+    edited during the stage must not change what its policies say they trained on."""
+    from common.world_file import WorldFile
+
+    with warnings.catch_warnings():  # the file's warnings were given as the curriculum was read
+        warnings.simplefilter("ignore", ScenarioWarning)
+        return WorldFile(path).initial.robot
 
 
 def manifest_for(config: CurriculumConfig, commit: str | None, index: int, timesteps: int, wall_time: float,
