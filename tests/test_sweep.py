@@ -300,3 +300,18 @@ def test_parameter_importance_is_not_drawn_when_every_trial_scored_the_same():
     assert not flat.patches and "no parameter importance" in flat.texts[0].get_text()
     _importance(varied, trials([0.1, 0.9, 0.2, 0.8, 0.3, 0.7]), "success_rate")
     assert len(varied.patches) == 2 and not varied.texts
+
+
+def test_a_seed_sweep_stopped_by_ctrl_c_says_so_and_how_to_go_on(tmp_path, capsys, monkeypatch):
+    """Ray Tune ends a sweep on the first Ctrl-C and returns: its unfinished trials were reported
+    as the sweep's figures, with exit code 0 (seen by running one and sending SIGINT)."""
+    from common.curriculum import sweep
+
+    stopped = {"status": "stopped early", "name": "seed0", "final": None}
+    results = {"aggregate": {}, "trials": [stopped, {**stopped, "name": "seed1000"}], "concurrent_trials": 2,
+               "wall_seconds": 35.0}
+    monkeypatch.setattr(sweep, "run_sweep", lambda *args, **kwargs: results)
+    out = tmp_path / "sweep"
+    assert main(["sweep", str(TINY), "--seeds", "2", "--out", str(out)]) == 130
+    assert capsys.readouterr().err == (f"interrupted: 2 of 2 trials unfinished (each run is whole to its last "
+                                       f"checkpoint); continue with: curriculum sweep {TINY} --out {out} --resume\n")

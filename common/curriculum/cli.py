@@ -117,6 +117,13 @@ def _sweep(args: argparse.Namespace) -> int:
                   f"{agg['mean']:.3f}, over {agg['n']} trials")
     print(f"{len(results['trials'])} trials, {results['concurrent_trials']} at a time, {results['wall_seconds']:.0f} s; "
           f"results: {out / 'sweep.md'}")
+    unfinished = [t for t in results["trials"] if t["status"] == "stopped early"]
+    if unfinished and not args.space:
+        # A seed sweep stops no trial early: Ctrl-C did (Ray Tune ends the sweep on the first one and
+        # says to resume with its own API), and the figures above are of unfinished runs.
+        print(f"interrupted: {len(unfinished)} of {len(results['trials'])} trials unfinished (each run is whole to "
+              f"its last checkpoint); continue with: curriculum sweep {args.file} --out {out} --resume", file=sys.stderr)
+        return EXIT_INTERRUPTED
     failed = [t for t in results["trials"] if t["status"] == "error"]
     if not failed:
         return 0
