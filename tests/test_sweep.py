@@ -122,8 +122,8 @@ def test_trials_run_at_the_niceness_of_the_user_who_started_them(tmp_path, monke
     assert results["trials"][0]["status"] == "done"
     assert int((out / "niceness-seed0").read_text()) == os.getpriority(os.PRIO_PROCESS, 0)
     # What a resume holds to, recorded as the sweep began; the time is this command's.
-    assert json.loads((out / "options.json").read_text()) == {"seeds": 1, "space": None, "trials": 8,
-                                                               "metric": "success_rate"}
+    recorded = json.loads((out / "options.json").read_text())
+    assert recorded.pop("curriculum_sha256") and recorded == {"seeds": 1, "space": None, "trials": 8, "metric": "success_rate"}
     assert results["resumed"] is False
 
 
@@ -262,26 +262,34 @@ def test_failed_trials_fail_the_sweep_which_names_them_and_still_reports_the_res
 
 
 def test_a_resumed_sweep_holds_to_the_options_it_began_with(tmp_path, capsys):
-    """Tune restores the sweep it saved: --seeds 3 on a resumed sweep of 2 kept 2 seeds, silently."""
-    from common.curriculum.sweep import OPTIONS_FILE, sweep_options
+    """Tune restores the sweep it saved: --seeds 3 on a resumed sweep of 2 kept 2 seeds, and an
+    edited budget the old one, silently."""
+    import yaml
 
-    out = tmp_path / "sweep"
-    fresh = sweep_options(out, {"seeds": 2, "space": None, "trials": None, "metric": None}, resume=False)
-    assert fresh == {"seeds": 2, "space": None, "trials": 8, "metric": "success_rate"}
+    from common.curriculum.sweep import OPTIONS_FILE, curriculum_digest, sweep_options
+
+    out, digest = tmp_path / "sweep", curriculum_digest(yaml.safe_load(TINY.read_text()))
+    fresh = sweep_options(out, {"seeds": 2, "space": None, "trials": None, "metric": None}, False, TINY, digest)
+    assert fresh == {"seeds": 2, "space": None, "trials": 8, "metric": "success_rate", "curriculum_sha256": digest}
     out.mkdir()
     (out / OPTIONS_FILE).write_text(json.dumps(fresh))
     given = {"seeds": None, "space": None, "trials": None, "metric": None}
-    assert sweep_options(out, given, resume=True) == fresh  # left out: as it began
-    assert sweep_options(out, {**given, "seeds": 2}, resume=True) == fresh  # the same: fine
+    assert sweep_options(out, given, True, TINY, digest) == fresh  # left out: as it began
+    assert sweep_options(out, {**given, "seeds": 2}, True, TINY, digest) == fresh  # the same: fine
     assert main(["sweep", str(TINY), "--seeds", "3", "--out", str(out), "--resume"]) == 2
     assert capsys.readouterr().err == ("error: --seeds: 3, but this sweep began with 2: a resume continues it as it "
                                        "began (leave the option out, or choose another --out)\n")
+    edited = tmp_path / "edited.yaml"
+    edited.write_text(TINY.read_text().replace("budget: 512", "budget: 256"))
+    assert main(["sweep", str(edited), "--out", str(out), "--resume"]) == 2
+    assert capsys.readouterr().err == (f"error: {edited}: changed since this sweep began; a resume continues it as it "
+                                       "began (restore the file, or start a new sweep with another --out)\n")
     for bad, expected in (('{"seeds": 2}', "space: Field required"),
                           ('{"seeds": 1e9, "space": null, "trials": 8, "metric": "spl"}', "seeds: Input should be a valid integer"),
                           ('{"seeds": 100000, "space": null, "trials": 8, "metric": "spl"}', "seeds: Input should be less than")):
         (out / OPTIONS_FILE).write_text(bad)  # a shared run directory: its seeds drive a loop
         with pytest.raises(ConfigError, match=f"options.json: {expected}"):
-            sweep_options(out, given, resume=True)
+            sweep_options(out, given, True, TINY, digest)
 
 
 def test_parameter_importance_is_not_drawn_when_every_trial_scored_the_same():

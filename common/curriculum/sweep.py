@@ -29,6 +29,7 @@ refuses is a one-line error naming the space file and the path, not a sweep of f
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
@@ -256,16 +257,22 @@ class SweepOptions(BaseModel):
     space: Annotated[str, Field(max_length=4096)] | None
     trials: Annotated[int, Field(ge=1, le=10_000)]
     metric: Literal[METRICS]  # type: ignore[valid-type]
+    curriculum_sha256: Annotated[str, Field(pattern="^[0-9a-f]{64}$")] | None = None  # None: recorded before digests
 
 
-def sweep_options(out: Path, given: dict[str, Any], resume: bool) -> dict[str, Any]:
-    """The options a sweep runs with: those given, defaults for the rest; resumed, those it began
-    with (read from :data:`OPTIONS_FILE`), an option given otherwise refused: Tune restores the
-    sweep it saved, and --seeds 3 on a sweep of 2 kept 2 seeds without a word."""
-    from common.files import read_json
+def curriculum_digest(curriculum: dict) -> str:
+    """A digest of a curriculum's content (not its comments or layout), for a resume to compare."""
+    return hashlib.sha256(json.dumps(curriculum, sort_keys=True, default=str).encode()).hexdigest()
 
+
+def sweep_options(out: Path, given: dict[str, Any], resume: bool, source: str | Path, digest: str) -> dict[str, Any]:
+    """The options a sweep runs with: those given, defaults for the rest, and its curriculum's
+    ``digest``; resumed, those it began with (read from :data:`OPTIONS_FILE`), an option given
+    otherwise or an edited curriculum refused: Tune restores the sweep it saved, and --seeds 3 on
+    a sweep of 2 kept 2 seeds without a word, as an edited budget kept the old one."""
     from pydantic import ValidationError
 
+    from common.files import read_json
     from common.scenario import pydantic_error
 
     path = out / OPTIONS_FILE
@@ -279,8 +286,12 @@ def sweep_options(out: Path, given: dict[str, Any], resume: bool) -> dict[str, A
             if value is not None and value != recorded[name]:
                 raise ConfigError(None, f"--{name}", f"{quote(value)}, but this sweep began with {quote(recorded[name])}: a "
                                   "resume continues it as it began (leave the option out, or choose another --out)")
+        if recorded["curriculum_sha256"] not in (None, digest):
+            raise ConfigError(source, None, "changed since this sweep began; a resume continues it as it began "
+                              "(restore the file, or start a new sweep with another --out)")
         return recorded
-    return {name: OPTION_DEFAULTS[name] if value is None else value for name, value in given.items()}
+    return {**{name: OPTION_DEFAULTS[name] if value is None else value for name, value in given.items()},
+            "curriculum_sha256": digest}
 
 
 def run_sweep(source: str | Path, out: Path, seeds: int | None = None, space: str | Path | None = None,
@@ -297,7 +308,8 @@ def run_sweep(source: str | Path, out: Path, seeds: int | None = None, space: st
     out = Path(out).resolve()
     given = {"seeds": seeds, "space": None if space is None else str(Path(space).resolve()), "trials": trials,
              "metric": metric}
-    options = sweep_options(out, given, resume)
+    curriculum = read_yaml(source)
+    options = sweep_options(out, given, resume, source, curriculum_digest(curriculum))
     seeds, space, trials, metric = (options[name] for name in OPTION_DEFAULTS)
     if metric not in METRICS:
         raise ConfigError(None, "--metric", f"{metric!r}; allowed: {', '.join(METRICS)}")
@@ -318,7 +330,6 @@ def run_sweep(source: str | Path, out: Path, seeds: int | None = None, space: st
     import ray
     from ray import tune
 
-    curriculum = read_yaml(source)
     experiment = out / "ray"
     restore = resume and tune.Tuner.can_restore(str(experiment))
     if resume and not restore and not (out / "trials").is_dir():
