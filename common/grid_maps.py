@@ -24,7 +24,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from common.errors import ConfigError, quote
-from common.fields import Frozen, Whole
+from common.fields import Frozen
 from common.files import read_bytes, regular_file
 from common.irsim_package import import_irsim
 
@@ -40,7 +40,7 @@ class GridMap(Frozen):
 
     image: str | None = None
     generator: tuple[tuple[str, str | float | int | bool], ...] | None = None
-    downsample: Annotated[Whole, Field(ge=1, le=64)] = 1
+    downsample: Annotated[int, Field(ge=1, le=64)] = 1
 
     @model_validator(mode="after")
     def _one_source(self) -> "GridMap":

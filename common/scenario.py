@@ -14,6 +14,7 @@ than the world's diagonal.
 
 from __future__ import annotations
 
+import functools
 import math
 import re
 import typing
@@ -38,9 +39,7 @@ from common.fields import (  # noqa: F401  (re-exported: the scenario's caps and
     Frozen,
     Length,
     NonNegativeLength,
-    Number,
     Point,
-    Whole,
     Speed,
 )
 from common.grid_maps import GridMap, occupied_boxes, occupancy
@@ -176,7 +175,7 @@ Obstacle = Annotated[
 ]
 
 
-PositiveSpeed = Annotated[Number, Field(gt=0.0, le=MAX_SPEED)]
+PositiveSpeed = Annotated[float, Field(gt=0.0, le=MAX_SPEED)]
 MAX_PARTS = 32  # of a compound footprint: each is a collision shape the robot carries every step
 FootprintVertices = Annotated[tuple[tuple[Coordinate, Coordinate], ...], Field(min_length=3, max_length=MAX_VERTICES)]
 
@@ -233,7 +232,7 @@ class RobotProfile(Frozen):
     width: BodyLength = 0.2
     vertices: FootprintVertices | None = OMITTED_WHEN_ABSENT
     parts: Annotated[tuple[FootprintPart, ...], Field(min_length=1, max_length=MAX_PARTS)] | None = OMITTED_WHEN_ABSENT
-    footprint_offset: Annotated[Number, Field(ge=-MAX_LENGTH, le=MAX_LENGTH)] = omitted_at_default(0.0)
+    footprint_offset: Annotated[float, Field(ge=-MAX_LENGTH, le=MAX_LENGTH)] = omitted_at_default(0.0)
     kinematics: Literal["diff", "omni", "omni_angular", "acker"] = omitted_at_default("diff")
     wheel_radius: Length = 0.05
     wheel_base: Length = 0.22
@@ -252,7 +251,7 @@ class RobotProfile(Frozen):
     accel_lateral: Acceleration = omitted_at_default(math.inf)
     accel_steer: Acceleration = omitted_at_default(math.inf)
     encoder_noise: Fraction = 0.0
-    motion_noise: tuple[Annotated[Number, Field(ge=0.0, le=100.0)], ...] | None = OMITTED_WHEN_ABSENT
+    motion_noise: tuple[Annotated[float, Field(ge=0.0, le=100.0)], ...] | None = OMITTED_WHEN_ABSENT
     static: bool = omitted_at_default(False)
 
     @model_validator(mode="after")
@@ -359,11 +358,11 @@ class LidarSpec(Frozen):
     ends, so its ±π beam is read twice): IR-SIM world files set it, for parity with IR-SIM.
     """
 
-    beams: Annotated[Whole, Field(ge=1, le=4096)] = 36
+    beams: Annotated[int, Field(ge=1, le=4096)] = 36
     range_min: NonNegativeLength = 0.0
     range_max: Length = 5.0
-    angle_range: Annotated[Number, Field(gt=0.0, le=2.0 * math.pi + 1e-9)] = 2.0 * math.pi
-    offset: tuple[Annotated[Number, Field(ge=-MAX_LENGTH, le=MAX_LENGTH)], Annotated[Number, Field(ge=-MAX_LENGTH, le=MAX_LENGTH)], Angle] = (0.0, 0.0, 0.0)
+    angle_range: Annotated[float, Field(gt=0.0, le=2.0 * math.pi + 1e-9)] = 2.0 * math.pi
+    offset: tuple[Annotated[float, Field(ge=-MAX_LENGTH, le=MAX_LENGTH)], Annotated[float, Field(ge=-MAX_LENGTH, le=MAX_LENGTH)], Angle] = (0.0, 0.0, 0.0)
     noise_std: NonNegativeLength = 0.0
     repeat_end_beam: bool = False
 
@@ -408,7 +407,7 @@ class WorldSpec(Frozen):
     width: Length = 10.0
     height: Length = 10.0
     offset: Point = (0.0, 0.0)
-    step_time: Annotated[Number, Field(gt=0.0, le=10.0)] = 0.1
+    step_time: Annotated[float, Field(gt=0.0, le=10.0)] = 0.1
     walls: bool = True
     integrator: Literal["euler", "exact"] = "euler"
     collision_mode: Literal["stop", "unobstructed", "unobstructed_obstacles"] = Field(
@@ -589,17 +588,13 @@ def _models_in(annotation: Any) -> list[type[BaseModel]]:
 def allowed_keys(model: type[BaseModel], loc: Sequence[Any]) -> list[str] | None:
     """The keys allowed beside the unknown key at ``loc`` (a pydantic error's path from ``model``);
     None where the path leaves the models (a union member pydantic names by its tag, say)."""
-    models = _models_at(model, loc[:-1])
+    models = _walk(model, loc[:-1])[0]
     return sorted({key for m in models for key in m.model_fields}) if len(models) == 1 else None
 
 
-def _models_at(model: type[BaseModel], path: Sequence[Any]) -> list[type[BaseModel]]:
-    """The models a value at ``path`` from ``model`` may be (a union's members), or none."""
-    return _walk(model, path)[0]
-
-
 def _walk(model: type[BaseModel], path: Sequence[Any]) -> tuple[list[type[BaseModel]], list[Any]]:
-    """:func:`_models_at`, and ``path`` without the tagged unions' member tags pydantic puts in it
+    """The models a value at ``path`` from ``model`` may be (a union's members, or none), and
+    ``path`` without the tagged unions' member tags pydantic puts in it
     (``obstacles.0.circle.radius``: no one wrote a key ``circle``). A tag stands right after the
     field holding the union (or its list index); a key spelt like a tag anywhere else is a key."""
     models, tag, written, union = [model], "type", [], False
@@ -643,7 +638,7 @@ def pydantic_error(source: str | Path | None, error: ValidationError, model: typ
     elif first["type"] in ("union_tag_not_found", "union_tag_invalid"):
         # pydantic's wording ("Unable to extract tag using discriminator") named no key a person wrote.
         key = first["ctx"]["discriminator"].strip("'")
-        tags = [m.model_fields[key].default for m in _models_at(model, raw) if key in m.model_fields] if model else []
+        tags = [m.model_fields[key].default for m in _walk(model, raw)[0] if key in m.model_fields] if model else []
         given = first["input"].get(key) if isinstance(first["input"], dict) else first["ctx"].get("tag")
         field = f"{field}.{key}" if field else key
         message = "missing" if given is None else quote(given) + did_you_mean(given, tags)
@@ -659,8 +654,47 @@ def pydantic_error(source: str | Path | None, error: ValidationError, model: typ
     return ConfigError(source, field, message)
 
 
+@functools.cache
+def _flag_keys(model: type[BaseModel]) -> frozenset[str]:
+    """The names of the true/false fields of ``model`` and every model its fields hold."""
+    keys, seen, stack = set(), set(), [model]
+    while stack:
+        current = stack.pop()
+        if current in seen:
+            continue
+        seen.add(current)
+        for name, info in current.model_fields.items():
+            if info.annotation is bool or bool in typing.get_args(info.annotation):
+                keys.add(name)
+            stack.extend(_models_in(info.annotation))
+    return frozenset(keys)
+
+
+def refuse_booleans(data: Any, model: type[BaseModel], source: str | Path | None = None, field: str = "") -> None:
+    """A one-line error for true or false under a key of ``data`` (a person's mapping for ``model``)
+    that is not one of its flags: pydantic reads true as 1 (``width: true`` made a 1 m world).
+    One pass over what a person wrote, not a validator on every number: generated scenarios, made
+    at every reset, hold no booleans. A grid map generator's own parameters may be anything."""
+    flags = _flag_keys(model)
+
+    def walk(value: Any, path: tuple) -> None:
+        if isinstance(value, bool) and path and path[-1] not in flags:
+            name = ".".join(str(part) for part in (field, *path) if part != "")
+            raise ConfigError(source, name, f"got {str(value).lower()}; allowed: a number")
+        if isinstance(value, dict):
+            for key, item in value.items():
+                if key != "generator":
+                    walk(item, (*path, key))
+        elif isinstance(value, (list, tuple)):
+            for index, item in enumerate(value):
+                walk(item, (*path, index))
+
+    walk(data, ())
+
+
 def scenario_from_mapping(data: dict, source: str | Path | None = None) -> Scenario:
     """Validate a mapping as a scenario (schema and geometry)."""
+    refuse_booleans(data, Scenario, source)
     try:
         scenario = Scenario.model_validate(data)
     except ValidationError as exc:

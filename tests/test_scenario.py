@@ -433,3 +433,11 @@ def test_a_mistyped_scenario_is_told_in_the_words_of_its_file(tmp_path, text, ex
     with pytest.raises(ConfigError) as error:
         load_scenario(tmp_path / "s.yaml")
     assert str(error.value).startswith(f"{tmp_path / 's.yaml'}: {expected}"), str(error.value)
+
+
+def test_a_boolean_in_a_robot_mapping_is_refused_where_a_number_belongs_and_kept_for_a_flag():
+    from common.robots import robot_profile
+
+    with pytest.raises(ConfigError, match=r"^robot\.radius: got true; allowed: a number$"):
+        robot_profile({"radius": True})
+    assert robot_profile({"radius": 0.3, "static": True}).static

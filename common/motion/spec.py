@@ -30,7 +30,7 @@ from typing import Annotated, Literal, Union
 
 from pydantic import Field, model_validator
 
-from common.fields import Acceleration, Coordinate, Frozen, Length, MoverSpeed, NonNegative, Point, Positive, Whole
+from common.fields import Acceleration, Coordinate, Frozen, Length, MoverSpeed, NonNegative, Point, Positive
 
 MAX_GOALS = 1000  # per mover
 Pair = tuple[MoverSpeed, MoverSpeed]
@@ -65,7 +65,7 @@ class Orca(Frozen):
 
     name: Literal["orca"] = "orca"
     neighbor_dist: Positive = 15.0  # m
-    max_neighbors: Annotated[Whole, Field(ge=0, le=1000)] = 10
+    max_neighbors: Annotated[int, Field(ge=0, le=1000)] = 10
     time_horizon: Positive = 20.0  # s
     time_horizon_obst: Positive = 10.0  # s (IR-SIM's groups meet no obstacle lines)
     safe_radius: NonNegative = 0.1  # m added to the body's radius
