@@ -32,6 +32,8 @@ _TEMPLATES = {"flatland": "common.scenario:Scenario", "physics3d": "physics3d.ro
               "irsim": "common.scenario:Scenario"}
 # What a tier refuses to build, checked without building it (flatland builds every valid scenario).
 _REFUSALS = {"physics3d": "physics3d.world:refuse_unmodelled"}
+# Generator kinds a tier cannot build at all (the maze is an occupancy grid map: flatland only).
+UNBUILT_KINDS = {"physics3d": ("maze",)}
 TIERS = ("flatland", "physics3d")  # the tiers this project trains in
 # Where agents are evaluated: the tiers, and IR-SIM itself (an optional extra), run with the same
 # scenarios and metrics to tell navigation learnt from flatland learnt.
@@ -66,24 +68,21 @@ def tier_source(tier: str, world: WorldArgument, difficulty: float, conditions: 
     """The :class:`~common.sources.ScenarioSource` an env of ``tier`` draws ``world`` from under
     ``conditions`` (:func:`~common.sources.scenario_source` takes the same ``world``); generated
     scenarios are drawn around the robot the conditions put in, so their gaps fit it."""
-    from common.generators import KINDS, generate
+    from common.generators import KINDS
     from common.sources import scenario_source
 
+    kinds = [world] if isinstance(world, str) else list(world) if isinstance(world, Mapping) else []
+    if unbuilt := [kind for kind in kinds if kind in UNBUILT_KINDS.get(tier, ())]:
+        # Refused now: a mix drew it only after some resets, mid-training.
+        built = [kind for kind in KINDS if kind not in UNBUILT_KINDS[tier]]
+        raise ConfigError(None, "world", f"the {tier} tier does not build the {quote(unbuilt[0])} kind (an occupancy "
+                          f"grid map); allowed: {', '.join(built)}")
     if template is not None and not isinstance(template, Scenario):
         raise ConfigError(None, "template", f"got {quote(template)}; allowed: a Scenario (the robot, lidar and world "
                           "size the generator kinds draw around) or None")
     template = template or generator_template(tier)
     if conditions.profile is not None:
         template = template.model_copy(update={"robot": conditions.profile})
-    if tier in _REFUSALS:
-        # Every kind of a mix is asked now, as the tier refuses a scenario: a mix with a kind the
-        # tier cannot build (the maze's grid map in 3D) drew it only after some resets, mid-training.
-        kinds = [world] if isinstance(world, str) else list(world) if isinstance(world, Mapping) else []
-        for kind in (kind for kind in kinds if kind in KINDS):
-            try:
-                refuse_as_written(tier, generate(kind, 0, difficulty, "train", template))
-            except ConfigError as error:
-                raise ConfigError(None, "world", f"{quote(kind)}: {error}") from None
     return scenario_source(world, difficulty, template, resample, conditions.robot_family)
 
 

@@ -610,7 +610,7 @@ def test_human_render_opens_the_gui_under_xvfb():
 @pytest.mark.parametrize("kwargs, expected", [
     ({"camera": "false"}, "camera: got 'false'; allowed: true or false"),  # a non-empty string: the camera was on
     ({"resample": "no"}, "resample: got 'no'; allowed: true or false"),
-    ({"world": {"warehouse": 3, "maze": 1}}, "world: 'maze': grid_map: an occupancy grid map is not built"),  # at make,
+    ({"world": {"warehouse": 3, "maze": 1}}, "world: the physics3d tier does not build the 'maze' kind"),  # at make,
     ({"template": "x"}, "template: got 'x'; allowed: a Scenario"),  # not after the resets that drew it
 ])
 def test_arguments_the_3d_env_would_misread_are_refused_at_make(kwargs, expected):
