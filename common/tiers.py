@@ -32,8 +32,6 @@ _TEMPLATES = {"flatland": "common.scenario:Scenario", "physics3d": "physics3d.ro
               "irsim": "common.scenario:Scenario"}
 # What a tier refuses to build, checked without building it (flatland builds every valid scenario).
 _REFUSALS = {"physics3d": "physics3d.world:refuse_unmodelled"}
-# Generator kinds a tier cannot build at all (the maze is an occupancy grid map: flatland only).
-UNBUILT_KINDS = {"physics3d": ("maze",)}
 TIERS = ("flatland", "physics3d")  # the tiers this project trains in
 # Where agents are evaluated: the tiers, and IR-SIM itself (an optional extra), run with the same
 # scenarios and metrics to tell navigation learnt from flatland learnt.
@@ -68,15 +66,10 @@ def tier_source(tier: str, world: WorldArgument, difficulty: float, conditions: 
     """The :class:`~common.sources.ScenarioSource` an env of ``tier`` draws ``world`` from under
     ``conditions`` (:func:`~common.sources.scenario_source` takes the same ``world``); generated
     scenarios are drawn around the robot the conditions put in, so their gaps fit it."""
-    from common.generators import KINDS
     from common.sources import scenario_source
 
-    kinds = [world] if isinstance(world, str) else list(world) if isinstance(world, Mapping) else []
-    if unbuilt := [kind for kind in kinds if kind in UNBUILT_KINDS.get(tier, ())]:
-        # Refused now: a mix drew it only after some resets, mid-training.
-        built = [kind for kind in KINDS if kind not in UNBUILT_KINDS[tier]]
-        raise ConfigError(None, "world", f"the {tier} tier does not build the {quote(unbuilt[0])} kind (an occupancy "
-                          f"grid map); allowed: {', '.join(built)}")
+    _refuse_unbuilt_kinds(tier, [world] if isinstance(world, str) else list(world) if isinstance(world, Mapping) else [],
+                          difficulty)
     if template is not None and not isinstance(template, Scenario):
         raise ConfigError(None, "template", f"got {quote(template)}; allowed: a Scenario (the robot, lidar and world "
                           "size the generator kinds draw around) or None")
@@ -84,6 +77,31 @@ def tier_source(tier: str, world: WorldArgument, difficulty: float, conditions: 
     if conditions.profile is not None:
         template = template.model_copy(update={"robot": conditions.profile})
     return scenario_source(world, difficulty, template, resample, conditions.robot_family)
+
+
+def _refuse_unbuilt_kinds(tier: str, kinds: list[str], difficulty: float) -> None:
+    """A one-line error for a generator kind among ``kinds`` that ``tier`` cannot build (the maze's
+    grid map in 3D), asked of the tier's own refusal with a scenario of each kind drawn around the
+    tier's plain template: a mix drew such a kind only after some resets, mid-training. The plain
+    template, not the stage's robot: what the tier refuses of that robot is named by its own field."""
+    if tier not in _REFUSALS:
+        return
+    from common.generators import KINDS, generate
+
+    plain = generator_template(tier)
+
+    def refusal(kind: str) -> ConfigError | None:
+        try:
+            refuse_as_written(tier, generate(kind, 0, difficulty, "train", plain))
+        except ConfigError as error:
+            return error
+        return None
+
+    for kind in kinds:
+        if kind in KINDS and (error := refusal(kind)) is not None:
+            built = [other for other in KINDS if refusal(other) is None]
+            raise ConfigError(None, "world", f"the {tier} tier does not build the {quote(kind)} kind "
+                              f"({error.field}: {error.problem.split(';')[0]}); allowed: {', '.join(built)}")
 
 
 def refuse_as_written(tier: str, scenario: Scenario) -> None:

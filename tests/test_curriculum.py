@@ -94,7 +94,8 @@ def test_schema_errors_name_the_field_and_what_is_allowed(data, field, message):
     ("flatland", None, "robot: {kinematics: omni}\n",
      "stages.0.scenarios: world.yaml: scenario: robot.kinematics: a curriculum stage drives a differential drive (v, w)"),
     ("physics3d", {"kind": "maze"}, None,
-     "stages.0.scenarios: world: the physics3d tier does not build the 'maze' kind (an occupancy grid map); allowed: "
+     "stages.0.scenarios: world: the physics3d tier does not build the 'maze' kind (grid_map: an occupancy grid map is "
+     "not built in the 3D tier); allowed: "
      "open, sparse, cluttered, warehouse, trap, crowd, warehouse_moving, passages"),
     ("physics3d", None, "grid_map: {image: map.png}\n",
      "stages.0.scenarios: world.yaml: scenario: grid_map: an occupancy grid map is not built in the 3D tier"),
