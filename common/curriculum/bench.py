@@ -232,7 +232,7 @@ def _irsim_file_figures(key: str, data: dict, steps: int) -> dict[str, Any]:
 @contextlib.contextmanager
 def _main_job_ppo(kind: str, seed: int = 0, vec_env: str = "dummy"):
     """PPO with the main job's settings (8 envs, n_steps 256, batch 256, 5 epochs, lidar43_log,
-    its bounded-mean policy, one torch thread) on a generator kind, as the runner trains it, after
+    its bounded-mean 128 x 128 policy, one torch thread) on a generator kind, as the runner trains it, after
     a warm-up rollout (which also compiles numba kernels); torch's settings restored afterwards."""
     import torch
     from stable_baselines3 import PPO
@@ -248,7 +248,7 @@ def _main_job_ppo(kind: str, seed: int = 0, vec_env: str = "dummy"):
                                                               "max_steps": 300}, vec_env_cls=vec_env_class(vec_env))
     try:
         model = PPO(NavActorCriticPolicy, env, n_steps=256, batch_size=256, n_epochs=5, seed=seed, device="cpu",
-                    policy_kwargs={"bounded_mean": True})
+                    policy_kwargs={"bounded_mean": True, "net_arch": [128, 128]})
         model.set_logger(Logger(folder=None, output_formats=[]))  # else SB3 leaves an empty /tmp/SB3-* folder
         _train_as(model, stock=False)
         model.learn(2048)
