@@ -65,7 +65,7 @@ def _arrivals_within_a_tenth_of_a_metre(name: str, suite: str, tier: str = "flat
 @pytest.mark.parametrize("name", ["stage1_2d_ppo", "stage1_2d_sac", "stage1_2d_td3"])
 def test_a_shipped_sparse_policy_still_arrives_within_a_tenth_of_a_metre(name):
     # IR-SIM's default radius, the tightest the policies promise: their figures there are
-    # 94.0-98.5%, so 8 of 10 fails only when the observation, the action mapping or the weights no
+    # 97.0-98.5%, so 8 of 10 fails only when the observation, the action mapping or the weights no
     # longer reach the policy as trained.
     assert _arrivals_within_a_tenth_of_a_metre(name, "sparse") >= 0.8
 
