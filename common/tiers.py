@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import importlib
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, Protocol
@@ -81,27 +82,30 @@ def tier_source(tier: str, world: WorldArgument, difficulty: float, conditions: 
 
 def _refuse_unbuilt_kinds(tier: str, kinds: list[str], difficulty: float) -> None:
     """A one-line error for a generator kind among ``kinds`` that ``tier`` cannot build (the maze's
-    grid map in 3D), asked of the tier's own refusal with a scenario of each kind drawn around the
-    tier's plain template: a mix drew such a kind only after some resets, mid-training. The plain
-    template, not the stage's robot: what the tier refuses of that robot is named by its own field."""
+    grid map in 3D): a mix drew such a kind only after some resets, mid-training."""
     if tier not in _REFUSALS:
         return
-    from common.generators import KINDS, generate
-
-    plain = generator_template(tier)
-
-    def refusal(kind: str) -> ConfigError | None:
-        try:
-            refuse_as_written(tier, generate(kind, 0, difficulty, "train", plain))
-        except ConfigError as error:
-            return error
-        return None
+    from common.generators import KINDS
 
     for kind in kinds:
-        if kind in KINDS and (error := refusal(kind)) is not None:
-            built = [other for other in KINDS if refusal(other) is None]
+        if kind in KINDS and (error := _kind_refusal(tier, kind, float(difficulty))) is not None:
+            built = [other for other in KINDS if _kind_refusal(tier, other, float(difficulty)) is None]
             raise ConfigError(None, "world", f"the {tier} tier does not build the {quote(kind)} kind "
                               f"({error.field}: {error.problem.split(';')[0]}); allowed: {', '.join(built)}")
+
+
+@functools.cache
+def _kind_refusal(tier: str, kind: str, difficulty: float) -> ConfigError | None:
+    """The tier's own refusal (:func:`refuse_as_written`) of a scenario of ``kind`` drawn around its
+    plain template, or None. The plain template, not a stage's robot: what the tier refuses of that
+    robot is named by its own field. Cached: every env of a vector env asks it again."""
+    from common.generators import generate
+
+    try:
+        refuse_as_written(tier, generate(kind, 0, difficulty, "train", generator_template(tier)))
+    except ConfigError as error:
+        return error
+    return None
 
 
 def refuse_as_written(tier: str, scenario: Scenario) -> None:
