@@ -182,8 +182,14 @@ def test_the_bench_s_stock_and_runner_ways_switch_every_setting_and_restore_torc
 
     from common.curriculum import bench
 
+    from common.curriculum.schema import load_curriculum
+
     checks = torch.distributions.Distribution._validate_args
     with bench._main_job_ppo("open") as model:
+        # The main job's own settings, read from its file: a copy here once went on timing 64 x 64.
+        main_job = load_curriculum(bench.MAIN_JOB).stages[0]
+        assert model.policy.net_arch == main_job.hyperparams["policy_kwargs"]["net_arch"]
+        assert (model.n_envs, model.n_steps) == (main_job.n_envs, main_job.hyperparams["n_steps"])
         groups = model.policy.optimizer.param_groups
         assert not torch.distributions.Distribution._validate_args
         assert model.policy.direct_layer_calls and all(group["foreach"] for group in groups)

@@ -229,26 +229,33 @@ def _irsim_file_figures(key: str, data: dict, steps: int) -> dict[str, Any]:
             f"{key}_flatland_vs_irsim": None if theirs is None else round(flat / theirs, 1)}
 
 
+MAIN_JOB = Path(__file__).resolve().parents[2] / "curricula" / "stage1_2d.yaml"
+"""The main job's curriculum, whose PPO stage the ``ppo_*`` keys train."""
+
+
 @contextlib.contextmanager
 def _main_job_ppo(kind: str, seed: int = 0, vec_env: str = "dummy"):
-    """PPO with the main job's settings (8 envs, n_steps 256, batch 256, 5 epochs, lidar43_log,
-    its bounded-mean 128 x 128 policy, one torch thread) on a generator kind, as the runner trains it, after
-    a warm-up rollout (which also compiles numba kernels); torch's settings restored afterwards."""
+    """PPO with the main job's settings (:data:`MAIN_JOB`'s stage: its envs, rollout, epochs,
+    observation, episode length and policy, read from the file; one torch thread) on a generator
+    kind, as the runner trains it, after a warm-up rollout (which also compiles numba kernels);
+    torch's settings restored afterwards."""
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.logger import Logger
 
+    from common.curriculum.hyperparams import resolve_hyperparams
     from common.curriculum.policy import NavActorCriticPolicy, vec_env_class
+    from common.curriculum.schema import load_curriculum
     from flatland.env import NavEnv
 
+    (stage,) = load_curriculum(MAIN_JOB).stages
     threads, checks = torch.get_num_threads(), torch.distributions.Distribution._validate_args
     torch.set_num_threads(1)
-    env = make_vec_env(NavEnv, n_envs=8, seed=seed, env_kwargs={"world": kind, "observation": "lidar43_log",
-                                                              "max_steps": 300}, vec_env_cls=vec_env_class(vec_env))
+    env = make_vec_env(NavEnv, n_envs=stage.n_envs, seed=seed, vec_env_cls=vec_env_class(vec_env),
+                       env_kwargs={"world": kind, "observation": stage.observation, "max_steps": stage.max_steps})
     try:
-        model = PPO(NavActorCriticPolicy, env, n_steps=256, batch_size=256, n_epochs=5, seed=seed, device="cpu",
-                    policy_kwargs={"bounded_mean": True, "net_arch": [128, 128]})
+        model = PPO(NavActorCriticPolicy, env, seed=seed, device="cpu", **resolve_hyperparams(stage.hyperparams))
         model.set_logger(Logger(folder=None, output_formats=[]))  # else SB3 leaves an empty /tmp/SB3-* folder
         _train_as(model, stock=False)
         model.learn(2048)
