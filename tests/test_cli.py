@@ -541,9 +541,11 @@ def test_a_world_no_tier_can_build_is_refused_by_validate_and_named_where_it_is_
     omni.write_text("start: [1, 1, 0]\ngoal: [8, 8]\nrobot: {kinematics: omni}\n")
     assert main(["compare", "--controllers", "reactive", "--episodes", "1", "--scenario-file", str(omni),
                  "--out", str(tmp_path / "c")]) == 2
-    # (after the line announcing the comparison: the controller refuses the robot as it is bound)
-    assert capsys.readouterr().err.splitlines()[-1].startswith(f"error: {omni}: robot.kinematics: the reactive "
-                                                                "controller drives")
+    # One line, the refusal: nothing is announced for a comparison that cannot run.
+    assert capsys.readouterr().err.startswith(f"error: {omni}: robot.kinematics: the reactive controller drives")
+    shipped = Path(__file__).resolve().parents[1] / "curricula" / "policies" / "stage1_2d_ppo.zip"
+    assert main(["eval", "--policy", str(shipped), "--episodes", "1", "--scenario-file", str(omni)]) == 2
+    assert capsys.readouterr().err.startswith(f"error: {omni}: robot.kinematics: the policy 'stage1_2d_ppo' drives")
     # An error of a flag stays the flag's, and so does one of the robot --env-kwargs put in.
     assert main(["compare", "--controllers", "teleport", "--scenario-file", str(omni), "--out", str(tmp_path / "d")]) == 2
     assert capsys.readouterr().err.startswith("error: --controllers: controllers.teleport: unknown controller")

@@ -147,7 +147,7 @@ def _eval(args: argparse.Namespace) -> int:
     for agent in agents:
         radius, conditions = _judged(args, [agent]), _conditions(args, [agent])
         scenarios = _scenarios(args, conditions=conditions)
-        _announce(args, agent.name, len(scenarios), radius, conditions)
+        _announce(args, [agent], scenarios, radius, conditions)
         summaries += evaluate([agent], scenarios, args.world, seed=args.seed, max_steps=args.max_steps,
                               conditions=conditions, goal_radius=radius, jobs=args.jobs)
     if args.json:
@@ -258,12 +258,20 @@ def _counted(count: int, noun: str) -> str:
     return f"{count} {noun}" if count == 1 else f"{count} {noun}s"
 
 
-def _announce(args: argparse.Namespace, agents: str, episodes: int, radius: float | None, conditions) -> None:
-    """Say on stderr what the agents are measured on, so a figure can be told apart and re-run."""
+def _announce(args: argparse.Namespace, agents: list, scenarios: list, radius: float | None, conditions) -> None:
+    """Say on stderr what the agents are measured on, so a figure can be told apart and re-run;
+    first bind each agent to every kind of robot among ``scenarios`` as the episodes will, so that
+    an agent that cannot drive one is refused before anything is announced."""
+    resolved = conditions.for_tier(args.world)
+    for scenario in {s.robot.kinematics: s for s in scenarios}.values():
+        scenario = resolved.scenario(scenario)
+        for agent in agents:
+            agent.bind(scenario.robot, scenario.lidar, scenario.goal_threshold if radius is None else radius)
+    episodes, who = len(scenarios), agents[0].name if len(agents) == 1 else _counted(len(agents), "agent")
     source = args.scenario_file or f"suite {args.suite}"
     judged = f"within {radius:g} m of the goal" if radius is not None else "within each scenario's goal radius"
     knobs = ", ".join(f"{k}={v}" for k, v in conditions.for_tier(args.world).given().items()) or "ideal"
-    print(f"{agents}: {args.world}, {source}, {_counted(episodes, 'episode')} from seed {args.seed}, judged {judged}; "
+    print(f"{who}: {args.world}, {source}, {_counted(episodes, 'episode')} from seed {args.seed}, judged {judged}; "
           f"conditions: {knobs}", file=sys.stderr)
 
 
@@ -324,7 +332,7 @@ def _compare(args: argparse.Namespace) -> int:
     scenarios = _scenarios(args, conditions=conditions) if not args.scenario_file else scenarios
     source = Path(args.scenario_file).stem if args.scenario_file else args.suite
     out = _compare_directory(Path(args.out) if args.out else Path("runs") / "compare" / f"{args.world}-{source}")
-    _announce(args, _counted(len(agents), "agent"), len(scenarios), radius, conditions)
+    _announce(args, agents, scenarios, radius, conditions)
     with Progress(transient=True, console=_stderr_console()) as bar:
         task = bar.add_task(f"{source}: {len(agents)} agents x {len(scenarios)} episodes", total=len(agents) * len(scenarios))
         summaries = evaluate(agents, scenarios, args.world, seed=args.seed, max_steps=args.max_steps,
@@ -428,7 +436,7 @@ def _render(args: argparse.Namespace) -> int:
     _settle(args, [agent])
     radius, conditions = _judged(args, [agent]), _conditions(args, [agent])
     (scenario,) = _scenarios(args, count=1, conditions=conditions, first=args.index)
-    _announce(args, agent.name, 1, radius, conditions)
+    _announce(args, [agent], [scenario], radius, conditions)
     scenario = conditions.for_tier(args.world).scenario(scenario)  # the robot and the encoders that drive
     gif, episode, true_path, estimate = _record(agent, scenario, args, gif, radius, args.every)
     print(f"{gif}: {agent.name} on {scenario.name}: {episode.outcome} after {episode.steps} steps, "
