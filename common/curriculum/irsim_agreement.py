@@ -34,7 +34,7 @@ from common.task import judged_radius
 
 SHIPPED = Path(__file__).resolve().parents[2] / "curricula" / "policies"
 SHIPPED_2D = ("stage1_2d_ppo", "stage1_2d_sac", "stage1_2d_td3", "curriculum_2d_ppo", "curriculum_2d_sac",
-              "cluttered_2d_sac", "moving_2d_sac")
+              "curriculum_2d_sac_36beams", "cluttered_2d_sac", "moving_2d_sac")
 
 
 # The crowd both simulators move alike: people under the social force (IR-SIM's group sees the
