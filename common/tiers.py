@@ -88,8 +88,8 @@ def _refuse_unbuilt_kinds(tier: str, kinds: list[str], difficulty: float) -> Non
     from common.generators import KINDS
 
     for kind in kinds:
-        if kind in KINDS and (error := _kind_refusal(tier, kind, float(difficulty))) is not None:
-            built = [other for other in KINDS if _kind_refusal(tier, other, float(difficulty)) is None]
+        if kind in KINDS and (error := _kind_refusal(tier, kind, difficulty)) is not None:
+            built = [other for other in KINDS if _kind_refusal(tier, other, difficulty) is None]
             raise ConfigError(None, "world", f"the {tier} tier does not build the {quote(kind)} kind "
                               f"({error.field}: {error.problem.split(';')[0]}); allowed: {', '.join(built)}")
 

@@ -181,8 +181,9 @@ def test_the_bench_s_stock_and_runner_ways_switch_every_setting_and_restore_torc
     import torch
 
     from common.curriculum import bench
-
     from common.curriculum.schema import load_curriculum
+    from common.rewards import Reward
+    from common.task import Task
 
     checks = torch.distributions.Distribution._validate_args
     with bench._main_job_ppo("open") as model:
@@ -190,6 +191,10 @@ def test_the_bench_s_stock_and_runner_ways_switch_every_setting_and_restore_torc
         main_job = load_curriculum(bench.MAIN_JOB).stages[0]
         assert model.policy.net_arch == main_job.hyperparams["policy_kwargs"]["net_arch"]
         assert (model.n_envs, model.n_steps) == (main_job.n_envs, main_job.hyperparams["n_steps"])
+        env = model.get_env().envs[0].unwrapped  # its envs as the runner makes them, on the kind asked for
+        assert env.reward.spec == Reward(main_job.reward).spec and env.action_mapping == main_job.action_mapping
+        assert env.task.threshold == Task(main_job.env_kwargs["goal_threshold"], 1).threshold
+        assert env.scenario.name.startswith("open")
         groups = model.policy.optimizer.param_groups
         assert not torch.distributions.Distribution._validate_args
         assert model.policy.direct_layer_calls and all(group["foreach"] for group in groups)

@@ -235,10 +235,10 @@ MAIN_JOB = Path(__file__).resolve().parents[2] / "curricula" / "stage1_2d.yaml"
 
 @contextlib.contextmanager
 def _main_job_ppo(kind: str, seed: int = 0, vec_env: str = "dummy"):
-    """PPO with the main job's settings (:data:`MAIN_JOB`'s stage: its envs, rollout, epochs,
-    observation, episode length and policy, read from the file; one torch thread) on a generator
-    kind, as the runner trains it, after a warm-up rollout (which also compiles numba kernels);
-    torch's settings restored afterwards."""
+    """PPO as the runner trains :data:`MAIN_JOB`'s stage (its envs, with their observation,
+    reward and conditions, and its hyperparameters, read from the file; one torch thread), on the
+    generator kind ``kind`` instead of the stage's worlds, after a warm-up rollout (which also
+    compiles numba kernels); torch's settings restored afterwards."""
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_util import make_vec_env
@@ -246,6 +246,7 @@ def _main_job_ppo(kind: str, seed: int = 0, vec_env: str = "dummy"):
 
     from common.curriculum.hyperparams import resolve_hyperparams
     from common.curriculum.policy import NavActorCriticPolicy, vec_env_class
+    from common.curriculum.runner import stage_env_kwargs
     from common.curriculum.schema import load_curriculum
     from flatland.env import NavEnv
 
@@ -253,7 +254,7 @@ def _main_job_ppo(kind: str, seed: int = 0, vec_env: str = "dummy"):
     threads, checks = torch.get_num_threads(), torch.distributions.Distribution._validate_args
     torch.set_num_threads(1)
     env = make_vec_env(NavEnv, n_envs=stage.n_envs, seed=seed, vec_env_cls=vec_env_class(vec_env),
-                       env_kwargs={"world": kind, "observation": stage.observation, "max_steps": stage.max_steps})
+                       env_kwargs={**stage_env_kwargs(stage), "world": kind})
     try:
         model = PPO(NavActorCriticPolicy, env, seed=seed, device="cpu", **resolve_hyperparams(stage.hyperparams))
         model.set_logger(Logger(folder=None, output_formats=[]))  # else SB3 leaves an empty /tmp/SB3-* folder

@@ -260,19 +260,23 @@ def _counted(count: int, noun: str) -> str:
 
 def _announce(args: argparse.Namespace, agents: list, scenarios: list, radius: float | None, conditions) -> None:
     """Say on stderr what the agents are measured on, so a figure can be told apart and re-run;
-    first bind each agent to every kind of robot among ``scenarios`` as the episodes will, so that
-    an agent that cannot drive one is refused before anything is announced."""
+    an agent that cannot drive the episodes' robots is refused first, instead."""
     resolved = conditions.for_tier(args.world)
-    for scenario in {s.robot.kinematics: s for s in scenarios}.values():
-        scenario = resolved.scenario(scenario)
-        for agent in agents:
-            agent.bind(scenario.robot, scenario.lidar, scenario.goal_threshold if radius is None else radius)
-    episodes, who = len(scenarios), agents[0].name if len(agents) == 1 else _counted(len(agents), "agent")
+    _refuse_undrivable(agents, [resolved.scenario(s) for s in scenarios], radius)
+    who = agents[0].name if len(agents) == 1 else _counted(len(agents), "agent")
     source = args.scenario_file or f"suite {args.suite}"
     judged = f"within {radius:g} m of the goal" if radius is not None else "within each scenario's goal radius"
-    knobs = ", ".join(f"{k}={v}" for k, v in conditions.for_tier(args.world).given().items()) or "ideal"
-    print(f"{who}: {args.world}, {source}, {_counted(episodes, 'episode')} from seed {args.seed}, judged {judged}; "
-          f"conditions: {knobs}", file=sys.stderr)
+    knobs = ", ".join(f"{k}={v}" for k, v in resolved.given().items()) or "ideal"
+    print(f"{who}: {args.world}, {source}, {_counted(len(scenarios), 'episode')} from seed {args.seed}, "
+          f"judged {judged}; conditions: {knobs}", file=sys.stderr)
+
+
+def _refuse_undrivable(agents: list, scenarios: list, radius: float | None) -> None:
+    """Bind each agent to every robot and lidar among ``scenarios`` (as conditioned), as the
+    episodes will: one it cannot drive raises its one-line error here, before any episode."""
+    for scenario in {(s.robot, s.lidar): s for s in scenarios}.values():
+        for agent in agents:
+            agent.bind(scenario.robot, scenario.lidar, scenario.goal_threshold if radius is None else radius)
 
 
 def _judged(args: argparse.Namespace, agents) -> float | None:

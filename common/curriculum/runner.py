@@ -70,7 +70,8 @@ def git_commit() -> str | None:
     return f"{commit}-dirty" if dirty else commit
 
 
-def _make_env_kwargs(stage: StageSpec) -> dict:
+def stage_env_kwargs(stage: StageSpec) -> dict:
+    """The keyword arguments of each env a stage trains in."""
     spec = stage.scenarios
     return dict(world=spec.world, observation=stage.observation, reward=stage.reward, max_steps=stage.max_steps,
                 difficulty=spec.difficulty, action_mapping=stage.action_mapping, **stage.env_kwargs)
@@ -239,7 +240,7 @@ class Runner:
         torch.distributions.Distribution.set_default_validate_args(False)
         paths = self.stage_paths(index, stage)
         seed = self.config.seed + index
-        venv = make_vec_env(_env_class(stage), n_envs=stage.n_envs, seed=seed, env_kwargs=_make_env_kwargs(stage),
+        venv = make_vec_env(_env_class(stage), n_envs=stage.n_envs, seed=seed, env_kwargs=stage_env_kwargs(stage),
                             vec_env_cls=vec_env_class(stage.vec_env))
         resuming = self.resume and paths.last.exists()
         if stage.normalize:
