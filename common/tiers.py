@@ -115,6 +115,17 @@ def refuse_as_written(tier: str, scenario: Scenario) -> None:
         _load(tier, _REFUSALS)(scenario)
 
 
+def refuse_unbuildable(world: str, scenario: Scenario, conditioned: Scenario) -> None:
+    """The one-line error the named world (a tier, or ``irsim``) would raise when built from
+    ``scenario`` (as written) made ``conditioned``, found without building it. IR-SIM says what it
+    refuses only when it loads the file."""
+    from common.motion.movers import refuse_unmodelled
+
+    if world in TIERS:
+        refuse_as_written(world, scenario)
+        refuse_unmodelled(conditioned)
+
+
 def as_built(tier: str, scenario: Scenario, conditions: Conditions) -> Scenario:
     """``scenario`` (which :func:`refuse_as_written` let through) as a training tier's world drives
     it under ``conditions``; or a one-line error for movers it cannot model under them."""

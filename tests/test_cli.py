@@ -559,3 +559,8 @@ def test_a_world_no_tier_can_build_is_refused_by_validate_and_named_where_it_is_
     assert main(["compare", "--controllers", "go_to_goal", "--episodes", "1", "--scenario-file", str(small),
                  "--env-kwargs", "robot:{radius: 2.5}", "--out", str(tmp_path / "e")]) == 2
     assert capsys.readouterr().err.splitlines()[-1].startswith("error: robot: 5 m across, it does not fit")
+    # A world the chosen tier cannot build is refused before the announcement too, named by its suite.
+    assert main(["compare", "--world", "physics3d", "--suite", "maze", "--controllers", "go_to_goal", "--episodes", "1",
+                 "--out", str(tmp_path / "f")]) == 2
+    assert capsys.readouterr().err == "error: suite maze: grid_map: an occupancy grid map is not built in the 3D tier; " \
+                                      "allowed: null\n"

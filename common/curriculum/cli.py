@@ -260,15 +260,31 @@ def _counted(count: int, noun: str) -> str:
 
 def _announce(args: argparse.Namespace, agents: list, scenarios: list, radius: float | None, conditions) -> None:
     """Say on stderr what the agents are measured on, so a figure can be told apart and re-run;
-    an agent that cannot drive the episodes' robots is refused first, instead."""
+    a world the tier cannot build, or an agent that cannot drive its robot, is refused first, instead."""
+    _refuse_undrivable(agents, _as_driven(args, scenarios, conditions), radius)
     resolved = conditions.for_tier(args.world)
-    _refuse_undrivable(agents, [resolved.scenario(s) for s in scenarios], radius)
     who = agents[0].name if len(agents) == 1 else _counted(len(agents), "agent")
     source = args.scenario_file or f"suite {args.suite}"
     judged = f"within {radius:g} m of the goal" if radius is not None else "within each scenario's goal radius"
     knobs = ", ".join(f"{k}={v}" for k, v in resolved.given().items()) or "ideal"
     print(f"{who}: {args.world}, {source}, {_counted(len(scenarios), 'episode')} from seed {args.seed}, "
           f"judged {judged}; conditions: {knobs}", file=sys.stderr)
+
+
+def _as_driven(args: argparse.Namespace, scenarios: list, conditions) -> list:
+    """The scenarios as ``--world`` drives them under ``conditions``; a world it cannot build (a
+    grid map in 3D, a polygon robot among movers) refused with the suite or file it came from."""
+    from common.tiers import refuse_unbuildable
+
+    resolved = conditions.for_tier(args.world)
+    # A robot that does not fit its world is the robot's error (--env-kwargs put it in), raised here.
+    driven = [resolved.scenario(scenario) for scenario in scenarios]
+    try:
+        for scenario, conditioned in zip(scenarios, driven):
+            refuse_unbuildable(args.world, scenario, conditioned)
+    except ConfigError as error:
+        raise ConfigError(args.scenario_file or f"suite {args.suite}", error.field, error.problem) from None
+    return driven
 
 
 def _refuse_undrivable(agents: list, scenarios: list, radius: float | None) -> None:
