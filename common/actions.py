@@ -2,9 +2,11 @@
 
 A robot of other kinematics (:mod:`common.drive`) gets one action per command channel, each in
 [-1, 1]: a car (``acker``) maps a[0] to v as below and a[1] to the steering angle (or rate) in
-[-steer_max, steer_max]; an omnidirectional robot maps every channel symmetrically, forward to
-[-v_max, v_max], lateral to [-lateral_max, lateral_max] and w to [-w_max, w_max]: one that
-cannot turn (``omni``) must be able to back towards a goal behind it.
+[-steer_max, steer_max]; an omnidirectional robot maps forward onto its [v_min, v_max] (IR-SIM's
+files give a negative ``vel_min``: one that cannot turn, ``omni``, backs towards a goal behind
+it), lateral to [-lateral_max, lateral_max] and w to [-w_max, w_max]. The whole range of a[0]
+spans what the robot can drive: mapped to [-v_max, v_max] and clipped to v_min = 0, its lower
+half stood still.
 
 Forward-only is deliberate: both tutorials found that a robot allowed to reverse learns to back
 away from obstacles instead of going round them.
@@ -92,6 +94,7 @@ class ActionMapping:
         scales = {"v": robot.v_max, "w": robot.w_max, "lateral": robot.lateral_max, "steer": robot.steer_max}
         self._scales = tuple(scales[name] for name in CHANNELS[robot.kinematics])
         self._omni = robot.kinematics in ("omni", "omni_angular")
+        self._forward = (robot.v_min, robot.v_max)
 
     def to_velocity(self, action) -> tuple[float, ...]:
         """The command for an action, (v, w) for a differential drive: finite values are clipped
@@ -108,8 +111,11 @@ class ActionMapping:
     def _command(self, action) -> tuple[float, ...]:
         clipped = [min(max(a, -1.0), 1.0) for a in _components(action, len(self._scales))]
         command = [a * scale for a, scale in zip(clipped, self._scales)]
-        if not self._omni:  # a car drives forward only, as a differential drive does
-            a0 = clipped[0]
+        a0 = clipped[0]
+        if self._omni:
+            low, high = self._forward
+            command[0] = low + 0.5 * (a0 + 1.0) * (high - low)
+        else:  # a car drives forward only, as a differential drive does
             command[0] = max(a0, 0.0) * self.v_max if self._rectified else 0.5 * (a0 + 1.0) * self.v_max
         return tuple(command)
 
@@ -117,7 +123,10 @@ class ActionMapping:
         """An action that commands ``command`` ((v, w) for a differential drive), clipped to what
         the mapping can express."""
         action = [value / scale for value, scale in zip(command, self._scales)]
-        if not self._omni:
-            v = command[0]
+        v = command[0]
+        if self._omni:
+            low, high = self._forward
+            action[0] = 2.0 * (v - low) / (high - low) - 1.0 if high > low else 0.0
+        else:
             action[0] = v / self.v_max if self._rectified else 2.0 * v / self.v_max - 1.0
         return np.clip(np.array(action, dtype=np.float32), -1.0, 1.0)

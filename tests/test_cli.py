@@ -564,3 +564,4 @@ def test_a_world_no_tier_can_build_is_refused_by_validate_and_named_where_it_is_
                  "--out", str(tmp_path / "f")]) == 2
     assert capsys.readouterr().err == "error: suite maze: grid_map: an occupancy grid map is not built in the 3D tier; " \
                                       "allowed: null\n"
+    assert not (tmp_path / "f").exists()  # nothing written for a comparison that cannot run

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import yaml
 
+from common.actions import ActionMapping
 from common.drive import CHANNELS, Drive
 from common.errors import ConfigError
 from common.scenario import RobotProfile, Scenario
@@ -176,6 +177,17 @@ def test_a_car_turns_with_the_steering_angle_it_began_the_step_with():
     angular = Drive(robot.model_copy(update={"steer_mode": "angular"}), dt=0.1)
     angular.move((1.0, 0.5))
     assert angular.steer == pytest.approx(0.05)  # a rate: 0.5 rad/s for 0.1 s
+
+
+@pytest.mark.parametrize("v_min", [0.0, -0.5, -1.0])
+def test_an_omni_robots_forward_action_spans_its_own_speed_range(v_min):
+    """Mapped to [-v_max, v_max] and then clipped to v_min, the lower half of a[0] stood still
+    for an omni robot that cannot back."""
+    mapping = ActionMapping(RobotProfile(kinematics="omni", v_min=v_min, v_max=1.0, lateral_max=0.5))
+    forward = [mapping.to_velocity(np.array([a, 0.0], dtype=np.float32))[0] for a in (-1.0, -0.5, 0.0, 1.0)]
+    assert forward == pytest.approx([v_min, v_min + 0.25 * (1.0 - v_min), 0.5 * (v_min + 1.0), 1.0])
+    assert mapping.to_velocity(np.array([0.3, -1.0], dtype=np.float32))[1] == -0.5  # lateral stays symmetric
+    assert mapping.to_action(0.5 * (v_min + 1.0), 0.25) == pytest.approx([0.0, 0.5])
 
 
 @pytest.mark.parametrize("kinematics, size", [("omni", 2), ("omni_angular", 3), ("acker", 2)])

@@ -363,6 +363,7 @@ def _compare(args: argparse.Namespace) -> int:
     table = markdown_table(summaries, title)
     if paired := paired_table(summaries):
         table += "\n" + paired
+    out.mkdir(parents=True, exist_ok=True)
     atomic_write_all({out / "comparison.md": lambda tmp: tmp.write_text(table),
                       out / "episodes.csv": lambda tmp: write_csv(summaries, tmp),
                       out / "comparison.png": lambda tmp: bar_chart(summaries, tmp, title)})
@@ -380,8 +381,8 @@ COMPARE_FILES = ("comparison.md", "episodes.csv", "comparison.png")
 
 
 def _compare_directory(out: Path) -> Path:
-    """``--out`` of compare, created: new, empty, or holding only an earlier comparison (which it
-    replaces); anything else is refused before a file is written."""
+    """``--out`` of compare, checked: new, empty, or holding only an earlier comparison (which it
+    replaces); anything else is refused before a file is written. Created when the results are."""
     if out.exists() and not out.is_dir():
         raise ConfigError(out, None, "is not a directory; --out names the comparison's directory")
     held = list(out.iterdir()) if out.is_dir() else []
@@ -392,7 +393,6 @@ def _compare_directory(out: Path) -> Path:
                           "choose an empty or a new --out (nothing was changed)")
     for leftover in (p for p in held if is_temporary_of(p.name, COMPARE_FILES)):
         leftover.unlink()
-    out.mkdir(parents=True, exist_ok=True)
     return out
 
 
