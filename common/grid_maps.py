@@ -26,9 +26,11 @@ from pydantic import Field, model_validator
 from common.errors import ConfigError, quote
 from common.fields import Frozen
 from common.files import read_bytes, regular_file
-from common.irsim_package import import_irsim
+from common.irsim_package import import_irsim, quiet_stdout
 
 MAX_CELLS = 4096 * 4096  # an image this many pixels is refused before it is decoded
+# A generated grid's cells: IR-SIM's Perlin noise holds several float arrays of this size at once.
+MAX_GENERATED_CELLS = 2048 * 2048
 MAX_IMAGE_BYTES = 64 * 1024 * 1024
 OCCUPIED_ABOVE = 50.0  # IR-SIM's OCCUPANCY_THRESHOLD
 
@@ -150,23 +152,66 @@ def maze_rooms(width: float, height: float, resolution: float, passage: float,
 # This project's own generators (the others are IR-SIM's): name -> builder of the spec's keys.
 OWN_GENERATORS = {"maze": maze_occupancy}
 
+# Each generator's keys: (what is allowed, the check). IR-SIM's own checks come after its work,
+# or never (a fill of 5 indexed out of its array; a resolution of 1e-5 asked for terabytes).
+_POSITIVE = ("a finite number above 0", lambda v: _is_real(v) and 0.0 < v < float("inf"))
+_FRACTION = ("a number from 0 to 1", lambda v: _is_real(v) and 0.0 <= v <= 1.0)
+_SEED = ("a whole number from 0, or null", lambda v: v is None or (_is_whole(v) and v >= 0))
+GENERATOR_KEYS: dict[str, dict[str, tuple[str, object]]] = {
+    "maze": {"resolution": _POSITIVE, "passage": _POSITIVE, "loops": _FRACTION, "seed": _SEED},
+    "perlin": {"resolution": _POSITIVE, "complexity": _POSITIVE, "fill": _FRACTION, "attenuation": _POSITIVE,
+               "fractal": ("a whole number from 1 to 16", lambda v: _is_whole(v) and 1 <= v <= 16), "seed": _SEED},
+}
+_REQUIRED = {"maze": ("resolution", "passage", "loops", "seed"), "perlin": ("resolution",)}
+
+
+def _is_real(value: object) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _is_whole(value: object) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def check_generator(spec: dict, width: float, height: float, field: str = "generator") -> None:
+    """A one-line error for a generator spec that names no known generator, a key it does not
+    take, a value out of its range, or more than :data:`MAX_GENERATED_CELLS` cells over the world:
+    checked before anything is built. The spec's keys are named under ``field``."""
+    name = spec.get("name")
+    if name not in GENERATOR_KEYS:
+        raise ConfigError(None, f"{field}.name", f"got {quote(name)}; allowed: {', '.join(GENERATOR_KEYS)}")
+    keys = GENERATOR_KEYS[name]
+    for key, value in spec.items():
+        if key == "name":
+            continue
+        if key not in keys:
+            raise ConfigError(None, f"{field}.{key}", f"unknown key of the {name} generator; allowed: "
+                              f"{', '.join(keys)}")
+        allowed, ok = keys[key]
+        if not ok(value):
+            raise ConfigError(None, f"{field}.{key}", f"got {quote(value)}; allowed: {allowed}")
+    for key in _REQUIRED[name]:
+        if key not in spec:
+            raise ConfigError(None, f"{field}.{key}", f"missing; the {name} generator needs "
+                              f"{', '.join(_REQUIRED[name])}")
+    resolution = spec["resolution"]
+    cells = max(1, round(width / resolution)) * max(1, round(height / resolution))
+    if cells > MAX_GENERATED_CELLS:
+        raise ConfigError(None, f"{field}.resolution", f"{resolution:g} m makes {cells:,} cells over the "
+                          f"{width:g} x {height:g} m world; allowed: at most {MAX_GENERATED_CELLS:,} cells")
+
 
 def _generated_occupancy(spec: dict, width: float, height: float) -> np.ndarray:
-    if spec.get("name") in OWN_GENERATORS:
+    check_generator(spec, width, height)
+    if spec["name"] in OWN_GENERATORS:
         keys = {k: v for k, v in spec.items() if k != "name"}
-        try:
-            return OWN_GENERATORS[spec["name"]](width=width, height=height, **keys)
-        except TypeError as exc:
-            raise ConfigError(None, "grid_map.generator", f"{exc}; allowed: seed, resolution, passage, loops") from None
-    try:
-        from irsim.world.map import build_grid_from_generator
-    except ImportError:
+        return OWN_GENERATORS[spec["name"]](width=width, height=height, **keys)
+    if import_irsim() is None:
         raise ConfigError(None, "world.obstacle_map", f"the {quote(spec.get('name'))} generator is IR-SIM's; allowed: "
-                          "an image, or install the irsim extra (pip install 'nav-curriculum[irsim]')") from None
-    try:
-        return np.asarray(build_grid_from_generator(spec, world_width=width, world_height=height), dtype=np.float64)
-    except (ValueError, TypeError) as exc:
-        raise ConfigError(None, "world.obstacle_map", f"{exc}".splitlines()[0]) from None
+                          "an image, or install the irsim extra (pip install 'nav-curriculum[irsim]')")
+    with quiet_stdout():  # IR-SIM's map module probes GUI backends on import, printing a line for each
+        from irsim.world.map import build_grid_from_generator
+    return np.asarray(build_grid_from_generator(spec, world_width=width, world_height=height), dtype=np.float64)
 
 
 @functools.lru_cache(maxsize=16)

@@ -43,7 +43,7 @@ from pydantic import ValidationError
 
 from common.drive import CHANNELS as DRIVE_CHANNELS, DEFAULT_NOISE
 from common.errors import ConfigError, did_you_mean, quote
-from common.grid_maps import GridMap, occupancy, resolve_image
+from common.grid_maps import GridMap, check_generator, occupancy, resolve_image
 from common.irsim_values import (
     Entry,
     Value,
@@ -227,7 +227,7 @@ def _world(value: Any, path: str) -> tuple[WorldSpec, str | None]:
 def _grid_map(value: Any, path: str, source: str | Path | None, world: WorldSpec) -> GridMap | None:
     """IR-SIM's ``obstacle_map`` (an image path, or a generator spec mapping) and ``mdownsample``,
     read now, so that a map that cannot be read is refused with the file."""
-    grid = _grid_source(value, path, source)
+    grid = _grid_source(value, path, source, world)
     if grid is not None:
         try:
             occupancy(grid, world.width, world.height)
@@ -236,7 +236,7 @@ def _grid_map(value: Any, path: str, source: str | Path | None, world: WorldSpec
     return grid
 
 
-def _grid_source(value: Any, path: str, source: str | Path | None) -> GridMap | None:
+def _grid_source(value: Any, path: str, source: str | Path | None, world_spec: WorldSpec) -> GridMap | None:
     world = {} if value is None else value
     item = world.get("obstacle_map")
     if item is None:
@@ -244,6 +244,8 @@ def _grid_source(value: Any, path: str, source: str | Path | None) -> GridMap | 
     at = join(path, "obstacle_map")
     downsample = whole(world.get("mdownsample", 1), join(path, "mdownsample"), 1, 64)
     if isinstance(item, dict) and item.get("name") == "image":
+        if "path" not in item:
+            raise fail(join(at, "path"), "missing; IR-SIM's image generator reads the image at path")
         item = item.get("path")
     if isinstance(item, str):
         folder = None if source is None else Path(source).resolve().parent
@@ -256,6 +258,10 @@ def _grid_source(value: Any, path: str, source: str | Path | None) -> GridMap | 
         if not isinstance(entry, (str, int, float, bool)):
             raise fail(join(at, str(key)), f"expected a number, a string or true/false (got {quote(entry)})")
     string(spec.get("name"), join(at, "name"))
+    try:
+        check_generator(spec, world_spec.width, world_spec.height, at)
+    except ConfigError as exc:
+        raise fail(exc.field, exc.problem) from None
     return GridMap(generator=tuple(sorted((str(k), v) for k, v in spec.items())), downsample=downsample)
 
 

@@ -11,10 +11,15 @@ def import_irsim():
     """IR-SIM (headless: matplotlib's Agg backend), or None where it is not installed."""
     os.environ.setdefault("MPLBACKEND", "Agg")
     try:
-        # On import IR-SIM tries the GUI backends (TkAgg, Qt5Agg) whatever MPLBACKEND says, and prints
-        # a line for each that fails: noise on every headless run, kept from the user's output.
-        with contextlib.redirect_stdout(io.StringIO()):
+        with quiet_stdout():
             import irsim
     except ImportError:
         return None
     return irsim
+
+
+def quiet_stdout() -> contextlib.AbstractContextManager:
+    """Python's stdout kept from the user within: on import IR-SIM's modules try the GUI backends
+    (TkAgg, Qt5Agg) whatever MPLBACKEND says, and print a line for each that fails, noise on every
+    headless run (and in front of a command's JSON)."""
+    return contextlib.redirect_stdout(io.StringIO())

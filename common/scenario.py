@@ -708,6 +708,8 @@ def scenario_from_mapping(data: dict, source: str | Path | None = None) -> Scena
         try:
             occupancy(grid, scenario.world.width, scenario.world.height)
         except ConfigError as exc:  # the image's own file named, where the error is about it
+            if exc.source is None and exc.field and exc.field.startswith("generator."):
+                raise ConfigError(source, f"grid_map.{exc.field}", exc.problem) from None
             raise ConfigError(source, "grid_map", f"{exc.source}: {exc.problem}" if exc.source else exc.problem) from None
     return scenario.check(source)
 

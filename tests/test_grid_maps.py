@@ -151,12 +151,46 @@ def test_grid_maps_are_refused_in_one_line_where_they_cannot_be_read_or_built(tm
         read_world_file(_world_file(tmp_path, str(tmp_path / "fifo.png")))
     with pytest.raises(ConfigError, match=r"world\.obstacle_map\.name: expected a string \(got 3\)"):
         read_world_file(_world_file(tmp_path, {"name": 3}))
-    optional("irsim")  # its generators, and their own refusal
-    with pytest.raises(ConfigError, match=r"world\.obstacle_map: Unknown or missing grid_generator name: 'labyrinth'"):
+    with pytest.raises(ConfigError, match=r"world\.obstacle_map\.name: got 'labyrinth'; allowed: maze, perlin"):
         read_world_file(_world_file(tmp_path, {"name": "labyrinth", "resolution": 0.1}))
     scenario = Scenario(grid_map=GridMap(image=_image(tmp_path, np.full((4, 4), 255))))
     with pytest.raises(ConfigError, match="grid_map: an occupancy grid map is not built in the 3D tier"):
         World(scenario)
+
+
+PERLIN = {"name": "perlin", "resolution": 0.1, "complexity": 0.12, "fill": 0.32, "fractal": 1, "attenuation": 0.5, "seed": 48}
+
+
+@pytest.mark.parametrize("change, field, problem", [
+    # IR-SIM would ask for 4e12 cells (terabytes), index out of its array, or overflow after seconds.
+    ({"resolution": 1e-5}, "resolution", "1e-05 m makes 4,000,000,000,000 cells over the 20 x 20 m world; allowed: at most 4,194,304 cells"),
+    ({"resolution": 0}, "resolution", "got 0; allowed: a finite number above 0"),
+    ({"resolution": -1}, "resolution", "got -1; allowed: a finite number above 0"),
+    ({"fill": 5}, "fill", "got 5; allowed: a number from 0 to 1"),
+    ({"fractal": 100000}, "fractal", "got 100000; allowed: a whole number from 1 to 16"),
+    ({"complexity": float("nan")}, "complexity", "got nan; allowed: a finite number above 0"),
+    ({"complexity": "abc"}, "complexity", "got 'abc'; allowed: a finite number above 0"),
+    ({"seed": -3}, "seed", "got -3; allowed: a whole number from 0, or null"),
+    ({"bogus": 48}, "bogus", "unknown key of the perlin generator; allowed: resolution, complexity, fill, attenuation, fractal, seed"),
+    ({"resolution": None}, "resolution", "missing; the perlin generator needs resolution"),
+])
+def test_a_generator_spec_is_checked_before_anything_is_built(tmp_path, change, field, problem):
+    from common.world_file import read_world_file
+
+    spec = {key: value for key, value in {**PERLIN, **change}.items() if value is not None}
+    with pytest.raises(ConfigError) as error:
+        read_world_file(_world_file(tmp_path, spec, width=20, height=20))
+    assert str(error.value) == f"{tmp_path / 'map.yaml'}: world.obstacle_map.{field}: {problem}"
+
+
+def test_a_project_files_maze_spec_is_checked_by_its_own_keys(tmp_path):
+    from common.scenario import load_scenario
+
+    path = tmp_path / "maze.yaml"
+    path.write_text("start: [1, 1, 0]\ngoal: [8, 8]\n"
+                    "grid_map: {generator: [[name, maze], [resolution, 0.1], [passage, 1.0], [loops, 2], [seed, 1]]}\n")
+    with pytest.raises(ConfigError, match=r"maze\.yaml: grid_map\.generator\.loops: got 2; allowed: a number from 0 to 1$"):
+        load_scenario(path)
 
 
 def test_a_maze_is_drawn_from_its_seed_and_every_room_is_reachable():
