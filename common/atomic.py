@@ -2,14 +2,34 @@
 
 from __future__ import annotations
 
+import errno
 import os
 import tempfile
 from pathlib import Path
 from typing import Callable, Iterable, Mapping
 
+from common.errors import ConfigError
+
 TEMPORARY_SUFFIX = ".tmp"
 _UMASK = os.umask(0)
 os.umask(_UMASK)
+
+
+def writable_place(path: str | Path, flag: str, directory: bool = False) -> Path:
+    """``path`` (a directory, else a file's folder) made and probed with a temporary file, so that
+    a place no file can be written to is refused before any work, naming ``flag``: the atomic
+    writes would fail only after the work, on a temporary's name."""
+    path = Path(path)
+    folder = path if directory else path.parent
+    try:
+        if folder.exists() and not folder.is_dir():  # mkdir would say "File exists"
+            raise NotADirectoryError(errno.ENOTDIR, os.strerror(errno.ENOTDIR))
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as error:
+        raise ConfigError(path, None, f"cannot write here ({error.strerror or error}); choose another {flag}") from None
+    return path
 
 
 def atomic_write(path: str | Path, write: Callable[[Path], object]) -> Path:

@@ -59,6 +59,7 @@ consumer parts), and 0.005 rad/s of noise per reading.
 from __future__ import annotations
 
 import functools
+from collections.abc import Iterable
 from typing import Annotated, Any, Literal, NamedTuple
 
 import numpy as np
@@ -172,12 +173,10 @@ class Conditions(BaseModel):
         """These conditions with the tier's defaults filled in. A knob of the other tier is an error,
         or with ``strict=False`` dropped (a 2D policy's wheel dynamics mean nothing in 3D, where
         physics supplies them)."""
-        wrong = _NOT_IN[tier]
         given = self.model_dump(exclude_none=True)
-        for knob in wrong:
-            if knob in given and strict:
-                allowed = ", ".join(k for k in Conditions.model_fields if k not in wrong)
-                raise ConfigError(None, knob, f"not {'an' if tier == 'irsim' else 'a'} {tier} knob; allowed: {allowed}")
+        if strict:
+            refuse_other_knobs(given, tier)
+        for knob in _NOT_IN[tier]:
             given.pop(knob, None)
         return Conditions.model_validate({**TIER_DEFAULTS[tier], **given})
 
@@ -258,3 +257,13 @@ def conditions_of(env_kwargs: dict[str, Any], source: str | None = None, field: 
     """The conditions among a stage's or a manifest's env kwargs (the rest are task options such as
     ``goal_threshold``, which shape training, not the world)."""
     return Conditions.parse({k: v for k, v in env_kwargs.items() if k in CONDITION_KEYS}, source, field)
+
+
+def refuse_other_knobs(knobs: Iterable[str], tier: str) -> None:
+    """A one-line error for a knob among ``knobs`` (names) that ``tier`` does not model: checked
+    before the knobs' values, whose advice would be for a knob the tier then refuses."""
+    wrong = _NOT_IN[tier]
+    for knob in knobs:
+        if knob in wrong:
+            allowed = ", ".join(k for k in Conditions.model_fields if k not in wrong)
+            raise ConfigError(None, knob, f"not {'an' if tier == 'irsim' else 'a'} {tier} knob; allowed: {allowed}")

@@ -647,6 +647,10 @@ def pydantic_error(source: str | Path | None, error: ValidationError, model: typ
         # An item missing from a fixed-length list: goal: [9.0] said "goal.1: Field required".
         field = ".".join(str(part) for part in path[:-1]) or None
         message = f"too few values (got {quote(first['input'])}); item {path[-1]} is missing"
+    elif first["type"] == "model_type":
+        # pydantic names its class ("a valid dictionary or instance of RobotFamily"); a person writes keys.
+        keys = allowed_keys(model, [*raw, None]) if model else None
+        message = f"expected a mapping{' of ' + ', '.join(keys) if keys else ''} (got {quote(first['input'])})"
     elif first["type"] == "value_error":
         message = message.removeprefix("Value error, ")  # our validators' messages say what they got
     elif "input" in first:

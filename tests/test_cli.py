@@ -14,6 +14,7 @@ import pytest
 from common.curriculum.cli import main
 from common.errors import ConfigError
 from common.scenario import Scenario
+from tests.conftest import optional
 
 GOOD = Scenario(name="good").to_yaml()
 
@@ -565,3 +566,47 @@ def test_a_world_no_tier_can_build_is_refused_by_validate_and_named_where_it_is_
     assert capsys.readouterr().err == "error: suite maze: grid_map: an occupancy grid map is not built in the 3D tier; " \
                                       "allowed: null\n"
     assert not (tmp_path / "f").exists()  # nothing written for a comparison that cannot run
+
+
+def test_a_place_no_output_can_be_written_to_is_refused_before_any_episode(tmp_path, capsys):
+    """compare ran every episode, replaced the earlier comparison, then failed on --gif; render
+    wrote its GIF before failing on --drift; export named its temporary file, not --onnx."""
+    blocked = tmp_path / "a_file"
+    blocked.write_text("")  # nothing can be made under a file
+    earlier = tmp_path / "earlier"
+    earlier.mkdir()
+    (earlier / "comparison.md").write_text("the earlier comparison")
+    assert main(["compare", "--controllers", "go_to_goal", "--episodes", "1", "--out", str(earlier),
+                 "--gif", str(blocked / "gifs")]) == 2
+    assert capsys.readouterr().err.splitlines()[-1] == (f"error: {blocked / 'gifs'}: cannot write here (Not a directory); "
+                                                        "choose another --gif")
+    assert (earlier / "comparison.md").read_text() == "the earlier comparison"
+    gif = tmp_path / "episode.gif"
+    assert main(["render", "--agent", "go_to_goal", "--out", str(gif), "--drift", str(blocked / "drift.png")]) == 2
+    assert capsys.readouterr().err.splitlines()[-1] == (f"error: {blocked / 'drift.png'}: cannot write here (Not a "
+                                                        "directory); choose another --drift")
+    assert not gif.exists()
+    optional("onnx")
+    shipped = Path(__file__).resolve().parents[1] / "curricula" / "policies" / "stage1_2d_ppo.zip"
+    assert main(["export", str(shipped), "--onnx", str(blocked / "policy.onnx")]) == 2
+    assert capsys.readouterr().err == (f"error: {blocked / 'policy.onnx'}: cannot write here (Not a directory); "
+                                       "choose another --onnx\n")
+
+
+def test_usage_errors_point_at_the_subcommands_help_and_a_repeated_env_kwarg_is_refused(capsys):
+    """An unknown flag of `render` pointed at `curriculum --help`; `--env-kwargs k:1 k:2` silently
+    took the last."""
+    with pytest.raises(SystemExit) as stop:
+        main(["render", "--agent", "go_to_goal", "--episodes", "2"])
+    assert stop.value.code == 2
+    assert capsys.readouterr().err == ("error: curriculum render: unrecognized arguments: --episodes 2 "
+                                       "(see curriculum render --help)\n")
+    assert main(["eval", "--policy", str(Path(__file__).resolve().parents[1] / "curricula" / "policies" / "stage1_2d_ppo.zip"),
+                 "--episodes", "1", "--env-kwargs", "lidar_noise:0.1", "lidar_noise:0.2"]) == 2
+    assert capsys.readouterr().err == "error: --env-kwargs.lidar_noise: given twice; allowed: each key once\n"
+    # A knob of the other tier is refused as such, before its value's advice (which it could not follow).
+    assert main(["compare", "--controllers", "go_to_goal", "--episodes", "1", "--env-kwargs", "friction:0.5"]) == 2
+    assert capsys.readouterr().err.startswith("error: --env-kwargs.friction: not a flatland knob; allowed: robot,")
+    assert main(["compare", "--controllers", "go_to_goal", "--episodes", "1", "--env-kwargs", "robot_family:xyz"]) == 2
+    assert capsys.readouterr().err == ("error: --env-kwargs.robot_family: expected a mapping of length, radius, shapes, "
+                                       "v_max, w_max, width (got 'xyz')\n")

@@ -43,6 +43,7 @@ def _with(change: dict, stage: dict | None = None) -> dict:
     (_with({}, {"algorithm": "dqn"}), "stages.0.algorithm", "'ppo', 'sac' or 'td3'"),
     (_with({}, {"optimizer_kernels": "together"}), "stages.0.optimizer_kernels", "'foreach' or 'fused'"),
     (_with({}, {"budget": -5}), "stages.0.budget", "greater than or equal to 1"),
+    (_with({}, {"budget": 10**29}), "stages.0.budget", "less than or equal to 10000000000"),
     (_with({}, {"hyperparams": {"learning_rte": 0.1}}), "stages.0.hyperparams.learning_rte", "not a PPO argument (did you mean 'learning_rate'?); allowed:"),
     (_with({}, {"hyperparams": {"policy_kwargs": {"net_arc": [64]}}}), "stages.0.hyperparams.policy_kwargs.net_arc",
      "unknown key (did you mean 'net_arch'?); allowed: activation_fn, bounded_mean"),

@@ -617,3 +617,10 @@ def test_arguments_the_3d_env_would_misread_are_refused_at_make(kwargs, expected
     with pytest.raises(ConfigError) as error:
         gym.make("physics3d/WarehouseNav-v0", **kwargs)
     assert str(error.value).startswith(expected), str(error.value)
+
+
+def test_importing_the_tier_prints_nothing():
+    """PyBullet printed its build time on stderr: a line in front of every 3D command's own output
+    and of its one-line errors."""
+    result = subprocess.run([sys.executable, "-c", "import physics3d"], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0 and result.stdout == "" and result.stderr == ""

@@ -292,6 +292,20 @@ def test_a_resumed_sweep_holds_to_the_options_it_began_with(tmp_path, capsys):
             sweep_options(out, given, True, TINY, digest)
 
 
+def test_a_sweep_writes_only_into_its_own_directory(tmp_path, capsys):
+    """A sweep wrote its ray/, trials/ and reports among a user's files, and named a temporary
+    only after Ray had started where --out was a file."""
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("x")
+    assert main(["sweep", str(TINY), "--out", str(mine)]) == 2
+    assert capsys.readouterr().err == (f"error: {mine}: is not empty and not a sweep's directory (it has no "
+                                       "options.json, ray or trials); choose an empty or a new --out (nothing was changed)\n")
+    assert [p.name for p in mine.iterdir()] == ["notes.txt"]
+    assert main(["sweep", str(TINY), "--out", str(mine / "notes.txt")]) == 2
+    assert capsys.readouterr().err == f"error: {mine / 'notes.txt'}: is not a directory; --out names the sweep's directory\n"
+
+
 def test_parameter_importance_is_not_drawn_when_every_trial_scored_the_same():
     """PED-ANOVA split the importance equally (0.5 each) over trials that all scored 0.0."""
     from matplotlib.figure import Figure

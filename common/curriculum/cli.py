@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 
-from common.atomic import atomic_write_all, is_temporary_of
+from common.atomic import atomic_write_all, is_temporary_of, writable_place
 from common.errors import ConfigError, ScenarioWarning, did_you_mean
 from common.task import MAX_EPISODES
 
@@ -353,6 +353,9 @@ def _compare(args: argparse.Namespace) -> int:
     source = Path(args.scenario_file).stem if args.scenario_file else args.suite
     out = _compare_directory(Path(args.out) if args.out else Path("runs") / "compare" / f"{args.world}-{source}")
     _announce(args, agents, scenarios, radius, conditions)
+    writable_place(out, "--out", directory=True)
+    if args.gif:
+        writable_place(args.gif, "--gif", directory=True)
     with Progress(transient=True, console=_stderr_console()) as bar:
         task = bar.add_task(f"{source}: {len(agents)} agents x {len(scenarios)} episodes", total=len(agents) * len(scenarios))
         summaries = evaluate(agents, scenarios, args.world, seed=args.seed, max_steps=args.max_steps,
@@ -363,7 +366,6 @@ def _compare(args: argparse.Namespace) -> int:
     table = markdown_table(summaries, title)
     if paired := paired_table(summaries):
         table += "\n" + paired
-    out.mkdir(parents=True, exist_ok=True)
     atomic_write_all({out / "comparison.md": lambda tmp: tmp.write_text(table),
                       out / "episodes.csv": lambda tmp: write_csv(summaries, tmp),
                       out / "comparison.png": lambda tmp: bar_chart(summaries, tmp, title)})
@@ -399,11 +401,11 @@ def _compare_directory(out: Path) -> Path:
 def _conditions(args: argparse.Namespace, agents) -> "Conditions":
     """The conditions to evaluate ``agents`` under: ``--env-kwargs``, over the conditions the
     policies among them trained with (which must agree, so every agent meets the same world)."""
-    from common.conditions import Conditions, conditions_of
+    from common.conditions import Conditions, conditions_of, refuse_other_knobs
 
     trained = {json.dumps(conditions_of(agent.trained_conditions).given(), sort_keys=True)
                for agent in agents if hasattr(agent, "trained_conditions")}
-    override = dict(args.env_kwargs or [])
+    override = _given_env_kwargs(args)
     if len(trained) > 1 and not override:
         raise ConfigError(None, "--policy", "these policies trained under different conditions "
                           f"({'; '.join(sorted(trained))}); give --env-kwargs to compare them under one")
@@ -412,8 +414,9 @@ def _conditions(args: argparse.Namespace, agents) -> "Conditions":
     # A policy's knobs of the other tier (2D wheel dynamics in 3D, say) do not carry over.
     resolved = Conditions.parse(base).for_tier(args.world, strict=False)
     try:
+        refuse_other_knobs(override, args.world)  # before the values: a value's advice is for a knob of this tier
         extra = Conditions.parse(override, field="--env-kwargs")
-        extra.for_tier(args.world)  # refuses the other tier's knobs
+        extra.for_tier(args.world)
     except ConfigError as error:
         raise ConfigError(None, error.field if error.field.startswith("--") else f"--env-kwargs.{error.field}",
                           error.problem) from None
@@ -425,6 +428,17 @@ def _conditions(args: argparse.Namespace, agents) -> "Conditions":
         if given in extra.given():
             trained_knobs.pop(replaced, None)
     return Conditions.parse({**trained_knobs, **extra.given()})
+
+
+def _given_env_kwargs(args: argparse.Namespace) -> dict:
+    """``--env-kwargs`` as a mapping: a key given twice is refused, as a key twice in YAML is
+    (the last would silently win)."""
+    pairs = list(args.env_kwargs or [])
+    keys = [key for key, _ in pairs]
+    for key in keys:
+        if keys.count(key) > 1:
+            raise ConfigError(None, f"--env-kwargs.{key}", "given twice; allowed: each key once")
+    return dict(pairs)
 
 
 def _file_name(name: str) -> str:
@@ -457,6 +471,9 @@ def _render(args: argparse.Namespace) -> int:
     radius, conditions = _judged(args, [agent]), _conditions(args, [agent])
     (scenario,) = _scenarios(args, count=1, conditions=conditions, first=args.index)
     _announce(args, [agent], [scenario], radius, conditions)
+    writable_place(gif, "--out")
+    if drift:
+        writable_place(drift, "--drift")
     scenario = conditions.for_tier(args.world).scenario(scenario)  # the robot and the encoders that drive
     gif, episode, true_path, estimate = _record(agent, scenario, args, gif, radius, args.every)
     print(f"{gif}: {agent.name} on {scenario.name}: {episode.outcome} after {episode.steps} steps, "
@@ -554,8 +571,18 @@ def _metres(text: str) -> float:
 class _Parser(argparse.ArgumentParser):
     """argparse, but a usage error is one line (no usage dump), exit code 2 like every bad input."""
 
+    commands: dict[str, argparse.ArgumentParser] = {}  # the subcommands' parsers, by name
+
     def error(self, message: str):
         self.exit(EXIT_BAD_INPUT, f"error: {self.prog}: {message} (see {self.prog} --help)\n")
+
+    def parse_args(self, args=None, namespace=None):
+        # argparse reports a subcommand's unknown flags from the top: pointed at `curriculum --help`.
+        parsed, extras = self.parse_known_args(args, namespace)
+        if extras:
+            command = self.commands.get(getattr(parsed, "command", None), self)
+            command.error(f"unrecognized arguments: {' '.join(extras)}")
+        return parsed
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -632,6 +659,7 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("policy", metavar="POLICY.zip")
     export.add_argument("--onnx", required=True, metavar="OUT.onnx", help="the file to write")
     export.set_defaults(handler=_export)
+    parser.commands = commands.choices
     return parser
 
 

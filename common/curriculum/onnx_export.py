@@ -19,7 +19,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from common.atomic import atomic_write
+from common.atomic import atomic_write, writable_place
 from common.curriculum.onnx_policy import INPUT, OUTPUT, export_metadata, observation_size
 from common.curriculum.policy import load_policy
 from common.curriculum.policy_file import Normalizer, PolicyFile
@@ -65,6 +65,7 @@ def export_onnx(policy_path: str | Path, out_path: str | Path) -> Path:
         raise ConfigError(None, "--onnx", f"exporting needs {' and '.join(missing)} (torch's exporter): "
                           "pip install 'nav-curriculum[onnx]'")
     file = PolicyFile(policy_path)
+    writable_place(out_path, "--onnx")
     raw_manifest = dict(file.raw_manifest)
     agent = load_policy(file)
     actor = DeterministicActor(agent.model, file.manifest.algorithm, agent.normalizer).eval()

@@ -47,6 +47,8 @@ from common.observations import LAYOUTS
 from common.rewards import resolve_reward_spec
 from common.scenario import pydantic_error
 from common.task import MAX_EPISODES, MAX_STEPS, check_env_kwargs
+
+MAX_BUDGET = 10**10  # a stage's env steps: days on a cluster; a typo's 10^29 is refused, not trained toward
 from common.tiers import TIERS
 from common.yaml_io import read_yaml_mapping
 
@@ -139,7 +141,7 @@ class StageSpec(_Strict):
     vec_env: Literal["dummy", "subproc"] = "dummy"
     optimizer_kernels: Literal[OPTIMIZER_KERNELS] = "foreach"  # type: ignore[valid-type]
     normalize: bool = False
-    budget: Annotated[int, Field(ge=1)]
+    budget: Annotated[int, Field(ge=1, le=MAX_BUDGET)]
     eval: EvalSpec
     promote: PromoteSpec | None = None
     init_from: str | None = None

@@ -42,7 +42,7 @@ from typing import Annotated, Any, Callable, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from common.atomic import atomic_write
+from common.atomic import atomic_write, writable_place
 from common.curriculum.sweep_report import METRICS, trial_name, write_results
 from common.errors import ConfigError, quote
 from common.yaml_io import read_yaml, read_yaml_mapping
@@ -294,6 +294,16 @@ def sweep_options(out: Path, given: dict[str, Any], resume: bool, source: str | 
             "curriculum_sha256": digest}
 
 
+def _check_out(out: Path) -> None:
+    """Refuse, before anything is written, an ``out`` that is a file, or a directory that holds
+    files and is not a sweep's (the results would be written among a user's files)."""
+    if out.exists() and not out.is_dir():
+        raise ConfigError(out, None, "is not a directory; --out names the sweep's directory")
+    if out.is_dir() and any(out.iterdir()) and not any((out / name).exists() for name in (OPTIONS_FILE, "ray", "trials")):
+        raise ConfigError(out, None, f"is not empty and not a sweep's directory (it has no {OPTIONS_FILE}, ray or "
+                          "trials); choose an empty or a new --out (nothing was changed)")
+
+
 def run_sweep(source: str | Path, out: Path, seeds: int | None = None, space: str | Path | None = None,
               trials: int | None = None, metric: str | None = None, address: str | None = None, cpus_per_trial: float = 1.0,
               max_failures: int = 2, resume: bool = False, device: str | None = None,
@@ -306,6 +316,7 @@ def run_sweep(source: str | Path, out: Path, seeds: int | None = None, space: st
     from common.curriculum.schema import load_curriculum
 
     out = Path(out).resolve()
+    _check_out(out)
     given = {"seeds": seeds, "space": None if space is None else str(Path(space).resolve()), "trials": trials,
              "metric": metric}
     curriculum = read_yaml(source)
@@ -319,6 +330,7 @@ def run_sweep(source: str | Path, out: Path, seeds: int | None = None, space: st
     domains = None if space is None else load_space(space, read_yaml(source), source)
     if address:
         check_address(address)
+    writable_place(out, "--out", directory=True)
     trainable = trainable or run_trial
     # Tune's newer console output ignores verbose=0; the runs' own reports are what users read.
     os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")
