@@ -54,6 +54,10 @@ def _with(change: dict, stage: dict | None = None) -> dict:
     (_with({}, {"scenarios": {"kind": "sparse", "suite": "sparse"}}), "stages.0.scenarios", "exactly one of kind, mix, suite or file"),
     (_with({}, {"eval": {"suite": "mars"}}), "stages.0.eval.suite", "unknown suite"),
     (_with({}, {"init_from": "previous"}), "stages.0.init_from", "the first stage has no previous stage"),
+    # Opened when validated, not when the stage starts (after the earlier stages trained).
+    (_with({}, {"init_from": str(TINY)}), "stages.0.init_from", "tiny_curriculum.yaml': not a zip file"),
+    (_with({}, {"init_from": str(ROOT / "curricula" / "policies" / "stage1_2d_sac.zip")}), "stages.0.init_from",
+     "is a sac policy, whose network a ppo stage cannot load; allowed: a ppo policy"),
     (_with({"stages": []}), "stages", "at least 1 item"),
     (_with({}, {"name": "a/../../x"}), "stages.0.name", "'a/../../x'; allowed: letters, digits, '_', '-' and '.'"),
     (_with({"name": "../escape"}), "name", "'../escape'; allowed: letters, digits"),

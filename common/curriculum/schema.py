@@ -241,6 +241,8 @@ def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
         raise ConfigError(source, f"{field}.init_from", "the first stage has no previous stage; allowed: null or a policy path")
     if stage.init_from not in (None, "previous") and not Path(stage.init_from).is_file():
         raise ConfigError(source, f"{field}.init_from", f"no policy file {quote(stage.init_from)}; allowed: null, previous or a .zip path")
+    if stage.init_from not in (None, "previous"):
+        _check_init_policy(stage, source, f"{field}.init_from")
     if stage.scenarios.file is not None and not Path(stage.scenarios.file).is_file():
         what = "a directory, not a file" if Path(stage.scenarios.file).is_dir() else "no such file"
         raise ConfigError(source, f"{field}.scenarios.file", f"{what}: {quote(stage.scenarios.file)}; allowed: a scenario "
@@ -266,6 +268,21 @@ def curriculum_from_mapping(data: dict, source: str | Path | None = None) -> Cur
     if len(set(names)) != len(names):
         raise ConfigError(source, "stages", f"stage names must be unique, got {names}")
     return config
+
+
+def _check_init_policy(stage: StageSpec, source: str | Path | None, field: str) -> None:
+    """The policy ``init_from`` names, opened now (bounded, no code run) and, where it holds this
+    project's manifest, trained by the stage's algorithm: found wanting only when its stage
+    began, a later stage's start failed after the earlier ones had trained."""
+    from common.curriculum.policy_file import PolicyFile
+
+    try:
+        file = PolicyFile(stage.init_from, require_manifest=False)
+    except ConfigError as error:
+        raise ConfigError(source, field, f"{quote(stage.init_from)}: {error.problem}") from None
+    if file.manifest is not None and file.manifest.algorithm != stage.algorithm:
+        raise ConfigError(source, field, f"{quote(stage.init_from)} is a {file.manifest.algorithm} policy, whose network "
+                          f"a {stage.algorithm} stage cannot load; allowed: a {stage.algorithm} policy")
 
 
 def _resolve_paths(config: CurriculumConfig, base: Path) -> CurriculumConfig:
