@@ -136,6 +136,10 @@ def test_compare_writes_only_into_a_directory_of_its_own(tmp_path, capsys):
     assert "is not a directory" in capsys.readouterr().err
     assert main([*argv, "--out", str(tmp_path / "mine")]) == 0
     assert main([*argv, "--out", str(tmp_path / "mine")]) == 0  # an earlier comparison is replaced
+    # Its GIFs beside it (--gif naming the same directory) are the comparison's, not the user's.
+    assert main([*argv, "--out", str(tmp_path / "mine"), "--gif", str(tmp_path / "mine")]) == 0
+    assert (tmp_path / "mine" / "go_to_goal.gif").is_file()
+    assert main([*argv, "--out", str(tmp_path / "mine")]) == 0
 
 
 def test_a_comparison_killed_while_writing_leaves_the_earlier_one_whole(tmp_path, capsys, monkeypatch):

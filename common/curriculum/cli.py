@@ -388,10 +388,12 @@ def _compare_directory(out: Path) -> Path:
     if out.exists() and not out.is_dir():
         raise ConfigError(out, None, "is not a directory; --out names the comparison's directory")
     held = list(out.iterdir()) if out.is_dir() else []
-    # A comparison's files, or temporaries a killed one left: anything else, even a folder under
-    # one of their names, is the user's (and would stop the set's renames halfway).
-    if any(not p.is_file() or (p.name not in COMPARE_FILES and not is_temporary_of(p.name, COMPARE_FILES)) for p in held):
-        raise ConfigError(out, None, f"holds files other than a comparison's ({', '.join(COMPARE_FILES)}); "
+    # A comparison's files, its GIFs (--gif may name the same directory) or temporaries a killed
+    # one left: anything else, even a folder under one of their names, is the user's (and would
+    # stop the set's renames halfway).
+    if any(not p.is_file() or (p.name not in COMPARE_FILES and p.suffix.lower() != ".gif"
+                               and not is_temporary_of(p.name, COMPARE_FILES)) for p in held):
+        raise ConfigError(out, None, f"holds files other than a comparison's ({', '.join(COMPARE_FILES)}, GIFs); "
                           "choose an empty or a new --out (nothing was changed)")
     for leftover in (p for p in held if is_temporary_of(p.name, COMPARE_FILES)):
         leftover.unlink()
