@@ -23,6 +23,13 @@ class Pose2D(NamedTuple):
     yaw: float
 
 
+def nan_command(command: tuple) -> ValueError:
+    """The error for a command holding NaN: every comparison with NaN is false, so it passes the
+    limits' clips and corrupts the pose (in PyBullet, the robot's body for good)."""
+    return ValueError(f"command {command!r}: NaN is not a velocity; allowed: finite numbers, clipped to the "
+                      "robot's limits")
+
+
 @register_jitable
 def wrap_angle(angle: float) -> float:
     """Wrap an angle to [-pi, pi)."""

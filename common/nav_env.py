@@ -72,6 +72,7 @@ class NavigationEnv(gym.Env):
         self._readings: Readings | None = None
         self._pending_rng: dict | None = None
         self._closed = False
+        self._ended = False  # the episode terminated or was truncated: step() needs a reset first
         self.trajectory: list[tuple[float, float]] = []
 
     @property
@@ -126,6 +127,7 @@ class NavigationEnv(gym.Env):
         scenario = self.scenario
         self._readings = self.world.reset(seed=int(self.np_random.integers(2**31 - 1)))
         self.task.start(scenario, self._readings, self.np_random)
+        self._ended = False
         self.reward.reset()
         self.layout.reset()
         if self.layout.reads_route or self._reads_route:
@@ -146,7 +148,7 @@ class NavigationEnv(gym.Env):
         self._route_distance = route.distance(*self._readings.pose[:2])
 
     def step(self, action) -> tuple[np.ndarray, float, bool, bool, dict]:
-        if self._closed or self._readings is None:
+        if self._closed or self._readings is None or self._ended:
             self._refuse("step")
         command = self.actions.to_velocity(action)
         readings = self._readings = self.world.step(*command)
@@ -171,6 +173,7 @@ class NavigationEnv(gym.Env):
         # A crash is a termination, not a truncation: its value must not bootstrap from the next state.
         terminated = reached or outcome == "collision"
         truncated = outcome == "timeout"
+        self._ended = terminated or truncated
         self.trajectory.append((readings.pose[0], readings.pose[1]))
         info = Info(reward_terms=shares, distance=task.distance, is_success=reached, collided=readings.collided)
         if self.render_mode == "human":
@@ -182,6 +185,9 @@ class NavigationEnv(gym.Env):
         check a first step measured progress from nowhere (a reward near -100)."""
         if self._closed:
             raise gym.error.ClosedEnvironmentError(f"{call}() on a closed env; make a new one")
+        if self._ended:
+            # Stepping on paid the goal's +100 again every step, the robot driving on past its end.
+            raise gym.error.ResetNeeded(f"{call}() after the episode ended (terminated or truncated); call reset() first")
         raise gym.error.ResetNeeded(f"{call}() before reset(); call reset() first")
 
     def render(self) -> np.ndarray | None:

@@ -22,7 +22,7 @@ import pymunk
 from common.actuation import Actuator, WheelDynamics
 from common.conditions import Conditions
 from common.drive import Drive, body_euler
-from common.kinematics import INTEGRATORS, Pose2D, WheelOdometry, wheel_speeds, wrap_angle
+from common.kinematics import INTEGRATORS, Pose2D, WheelOdometry, nan_command, wheel_speeds, wrap_angle
 from common.motion.movers import Movers, mover_generator
 from flatland.polygons import convex_pieces
 from common.readings import Contact, Imu, Odometry, Readings, frozen, mover_fault
@@ -182,6 +182,8 @@ class World:
         solids: list[np.ndarray] = []  # the bounds of polygons, whose outline alone leaves their inside unseen
         if self._pieces:
             self.space.remove(*self._pieces)
+            for piece in self._pieces:  # removed from the space, a shape stays in its body's set: ~3 kB a reset
+                piece.body = None
         self._pieces = []
         for obstacle in scenario.static_obstacles:
             if obstacle.unobstructed:
@@ -307,11 +309,16 @@ class World:
             if self.drive is not None:
                 self.drive.halt()
         elif self.drive is not None:
+            if any(value != value for value in command):
+                raise nan_command(command)
             (v, lateral, w), moved = self.drive.move(command, self.rng)
             self.pose, self._touching_static = self._move(self.pose, moved[0], moved[2], lateral=moved[1])
         else:
             v, w = command
-            v, w = self._clip(float(v), float(w))
+            v, w = float(v), float(w)
+            if v != v or w != w:
+                raise nan_command(command)
+            v, w = self._clip(v, w)
             if not self.actuator.idle:
                 v, w = self.actuator(v, w, self._dt)
             if self._compiled:

@@ -17,7 +17,7 @@ import pybullet as p
 from common.actuation import Actuator
 from common.conditions import Conditions
 from common.errors import ConfigError, quote
-from common.kinematics import Pose2D, WheelOdometry, unicycle_exact, wrap_angle
+from common.kinematics import Pose2D, WheelOdometry, nan_command, unicycle_exact, wrap_angle
 from common.motion.movers import mover_generator
 from common.readings import Contact, Odometry, Readings, frozen, mover_fault
 from common.scenario import Scenario
@@ -175,8 +175,11 @@ class World:
 
     def step(self, v: float, w: float) -> Readings:
         """Drive with (v m/s, w rad/s), clipped to the robot's limits, for one control period."""
+        v, w = float(v), float(w)
+        if v != v or w != w:
+            raise nan_command((v, w))
         v_lo, v_hi, w_lo, w_hi = self._limits
-        v, w = min(max(float(v), v_lo), v_hi), min(max(float(w), w_lo), w_hi)
+        v, w = min(max(v, v_lo), v_hi), min(max(w, w_lo), w_hi)
         if not self.actuator.idle:
             v, w = self.actuator(v, w, self.period)
         self.robot.drive(v, w)

@@ -146,6 +146,46 @@ def test_an_env_never_reset_refuses_to_step_in_both_tiers(env_id):
     env.close()
 
 
+@pytest.mark.parametrize("env_id", ["flatland/Nav-v0", "physics3d/WarehouseNav-v0"])
+def test_an_ended_episode_refuses_another_step_until_reset_in_both_tiers(env_id):
+    """Stepping on past the end paid the goal's +100 again every step, the robot driving on."""
+    import physics3d  # noqa: F401  (registers the 3D env)
+
+    env = gym.make(env_id, world=Scenario(start=(2.0, 2.0, 0.0), goal=(2.5, 2.0), goal_threshold=0.3)).unwrapped
+    env.reset(seed=0)
+    ended = False
+    for _ in range(50):
+        _, reward, terminated, truncated, info = env.step(np.array([1.0, 0.0], dtype=np.float32))
+        if terminated or truncated:
+            ended = True
+            break
+    assert ended and info["is_success"] and reward > 50.0
+    with pytest.raises(gym.error.ResetNeeded, match=r"step\(\) after the episode ended"):
+        env.step(np.array([1.0, 0.0], dtype=np.float32))
+    env.reset(seed=0)
+    env.step(np.array([1.0, 0.0], dtype=np.float32))  # a new episode steps again
+    env.close()
+
+
+@pytest.mark.parametrize("world_module", ["flatland", "physics3d"])
+def test_a_nan_command_is_refused_by_the_world_and_leaves_it_driving(world_module):
+    """NaN passed the limits' clips: the pose turned NaN, and the 3D robot crawled in every later
+    episode (0.002 m in 20 steps), a reset notwithstanding."""
+    import importlib
+
+    World = importlib.import_module(world_module).World
+    world = World(Scenario(start=(2.0, 2.0, 0.0), goal=(8.0, 8.0)), seed=0)
+    world.reset(seed=0)
+    with pytest.raises(ValueError, match=r"command \(nan, 0\.0\): NaN is not a velocity"):
+        world.step(float("nan"), 0.0)
+    world.reset(seed=0)
+    for _ in range(20):
+        readings = world.step(0.5, 0.0)
+    assert readings.pose[0] - 2.0 > 0.5  # 20 steps of 0.1 s at 0.5 m/s: about 1 m
+    if world_module == "physics3d":
+        world.close()
+
+
 @pytest.mark.parametrize("argument, value", [("goal_distance_scale", 0.0), ("goal_distance_scale", -1.0),
                                              ("goal_distance_scale", float("nan")), ("difficulty", 5.0),
                                              ("difficulty", float("nan"))])
