@@ -132,6 +132,12 @@ class Conditions(BaseModel):
             raise ValueError("robot and robot_family both choose the robot; allowed: one of them")
         return self
 
+    @field_validator("robot", mode="before")
+    @classmethod
+    def _profile_as_data(cls, value: Any) -> Any:
+        # A RobotProfile from Python, kept as the mapping a file would give (a manifest stores it).
+        return value.model_dump(mode="json", exclude_defaults=True) if isinstance(value, RobotProfile) else value
+
     @field_validator("robot")
     @classmethod
     def _known_robot(cls, value: Any) -> Any:

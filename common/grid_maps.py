@@ -27,6 +27,7 @@ from common.errors import ConfigError, quote
 from common.fields import Frozen
 from common.files import read_bytes, regular_file
 from common.irsim_package import import_irsim, quiet_stdout
+from common.params import is_real
 
 MAX_CELLS = 4096 * 4096  # an image this many pixels is refused before it is decoded
 # A generated grid's cells: IR-SIM's Perlin noise holds several float arrays of this size at once.
@@ -154,8 +155,8 @@ OWN_GENERATORS = {"maze": maze_occupancy}
 
 # Each generator's keys: (what is allowed, the check). IR-SIM's own checks come after its work,
 # or never (a fill of 5 indexed out of its array; a resolution of 1e-5 asked for terabytes).
-_POSITIVE = ("a finite number above 0", lambda v: _is_real(v) and 0.0 < v < float("inf"))
-_FRACTION = ("a number from 0 to 1", lambda v: _is_real(v) and 0.0 <= v <= 1.0)
+_POSITIVE = ("a finite number above 0", lambda v: is_real(v) and 0.0 < v < float("inf"))
+_FRACTION = ("a number from 0 to 1", lambda v: is_real(v) and 0.0 <= v <= 1.0)
 _SEED = ("a whole number from 0, or null", lambda v: v is None or (_is_whole(v) and v >= 0))
 GENERATOR_KEYS: dict[str, dict[str, tuple[str, object]]] = {
     "maze": {"resolution": _POSITIVE, "passage": _POSITIVE, "loops": _FRACTION, "seed": _SEED},
@@ -163,10 +164,6 @@ GENERATOR_KEYS: dict[str, dict[str, tuple[str, object]]] = {
                "fractal": ("a whole number from 1 to 16", lambda v: _is_whole(v) and 1 <= v <= 16), "seed": _SEED},
 }
 _REQUIRED = {"maze": ("resolution", "passage", "loops", "seed"), "perlin": ("resolution",)}
-
-
-def _is_real(value: object) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 def _is_whole(value: object) -> bool:

@@ -55,6 +55,12 @@ class NavigationEnv(gym.Env):
         # Every other keyword is a condition knob (common.conditions), validated there by name.
         self.conditions = Conditions.parse({k: v for k, v in conditions.items() if v is not None}).for_tier(self.tier)
         self.source = tier_source(self.tier, world, difficulty, self.conditions, template, resample)
+        if self.conditions.profile is None:
+            # The action space is fixed: found now, not at whichever reset first draws the odd one out.
+            kinds = {example.robot.kinematics for example in self.source.examples}
+            if len(kinds) > 1:
+                raise ConfigError(None, "world", f"scenarios of robots with kinematics {', '.join(sorted(kinds))}; an "
+                                  "env's action space is fixed, so its scenarios must share the robot's kinematics")
         self.task = Task(goal_threshold, max_steps)
         self.observation_name = observation
         self.action_mapping = action_mapping

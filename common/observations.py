@@ -101,6 +101,7 @@ from common.errors import ConfigError, quote
 from common.geometry import sensor_origin
 from common.kernel_cache import kernel, uncounted
 from common.kinematics import wrap_angle
+from common.params import is_real
 from common.readings import Readings
 from common.robots import footprint_reach
 from common.route import Route
@@ -203,8 +204,8 @@ def make_layout(
 ) -> ObservationLayout:
     """Build the named layout for a robot and its lidar (``goal_distance_scale``: the distance, in
     metres, that the goal-distance entry reads as 1)."""
-    if not 0.0 < goal_distance_scale < math.inf:  # NaN fails too
-        raise ConfigError(None, "goal_distance_scale", f"{goal_distance_scale}; allowed: a finite distance > 0 (metres)")
+    if not (is_real(goal_distance_scale) and 0.0 < goal_distance_scale < math.inf):  # NaN fails too
+        raise ConfigError(None, "goal_distance_scale", f"got {quote(goal_distance_scale)}; allowed: a finite distance > 0 (metres)")
     inv_v, inv_w, inv_r = 1.0 / robot.v_max, 1.0 / robot.w_max, 1.0 / lidar.range_max
     if name == "nav7":
         low = np.array([-1, -1, -1, -1, -1, 0, 0], dtype=np.float32)

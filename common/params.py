@@ -10,10 +10,13 @@ from __future__ import annotations
 
 import inspect
 import math
+import numbers
 import types
 import typing
 from pathlib import Path
 from typing import Any, Callable
+
+import numpy as np
 
 from common.errors import ConfigError, quote
 
@@ -92,6 +95,11 @@ def coerce(value: Any, annotation: Any, default: Any, source: str | Path | None,
         return _convert(value, annotation)
     except _Mismatch:
         raise ConfigError(source, field, f"got {quote(value)}; allowed: {describe(annotation)} (default {quote(default)})") from None
+
+
+def is_real(value: Any) -> bool:
+    """A real number (NumPy's included): not a bool, not a string such as "0.5"."""
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
 
 
 def is_finite(number: int | float) -> bool:

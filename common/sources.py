@@ -8,6 +8,7 @@ initial state is restored, as IR-SIM's ``reset()`` does. Generator kinds draw an
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Mapping, Protocol, Sequence, Union
 
@@ -15,6 +16,7 @@ import numpy as np
 
 from common.errors import ConfigError, quote
 from common.generators import KINDS, generate
+from common.params import is_real
 from common.robots import RobotFamily
 from common.scenario import Scenario
 from common.world_file import WorldFile
@@ -79,8 +81,9 @@ class MixSource:
 
     def __init__(self, weights: Mapping[str, float], difficulty: float = 0.5, template: Scenario | None = None,
                  family: RobotFamily | None = None) -> None:
-        if not weights or any(w <= 0 for w in weights.values()):
-            raise ConfigError(None, "world", "a mix needs at least one kind, each with a positive weight")
+        if not weights or not all(is_real(w) and 0.0 < w < math.inf for w in weights.values()):  # NaN fails too
+            raise ConfigError(None, "world", f"got {quote(dict(weights))}; a mix needs at least one kind, each with a "
+                              "finite weight above 0")
         self.sources = [_kind_source(kind, difficulty, template, family) for kind in weights]
         self.examples = [example for source in self.sources for example in source.examples]
         total = float(sum(weights.values()))
@@ -113,8 +116,8 @@ def _kind_source(kind: str, difficulty: float, template: Scenario | None,
                  family: RobotFamily | None = None) -> GeneratorSource:
     if kind not in KINDS:
         raise ConfigError(None, "world", f"unknown scenario kind {quote(kind)}; allowed: {', '.join(KINDS)}")
-    if not 0.0 <= difficulty <= 1.0:  # NaN fails too; checked here as the warehouse's is replaced below
-        raise ConfigError(None, "difficulty", f"{difficulty} is outside [0, 1]")
+    if not (is_real(difficulty) and 0.0 <= difficulty <= 1.0):  # NaN fails too; checked here as the warehouse's is replaced below
+        raise ConfigError(None, "difficulty", f"got {quote(difficulty)}; allowed: a number from 0 to 1")
     # The warehouse is defined by its 31 obstacles: it is always drawn at full difficulty.
     return GeneratorSource(kind, 1.0 if kind == "warehouse" else difficulty, template, family)
 

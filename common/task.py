@@ -43,7 +43,8 @@ def threshold_range(value: GoalThreshold) -> tuple[float, float] | None:
     from uniformly per episode."""
     if value is None:
         return None
-    pair = (value, value) if isinstance(value, (int, float)) and not isinstance(value, bool) else value
+    # numbers.Real: NumPy's float32 (a policy's output, a config's array) is no float, but a number.
+    pair = (value, value) if isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)) else value
     try:
         low, high = (float(v) for v in pair)
     except (TypeError, ValueError):

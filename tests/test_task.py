@@ -188,8 +188,25 @@ def test_a_nan_command_is_refused_by_the_world_and_leaves_it_driving(world_modul
 
 @pytest.mark.parametrize("argument, value", [("goal_distance_scale", 0.0), ("goal_distance_scale", -1.0),
                                              ("goal_distance_scale", float("nan")), ("difficulty", 5.0),
-                                             ("difficulty", float("nan"))])
+                                             ("difficulty", float("nan")), ("difficulty", "0.5"),
+                                             ("goal_distance_scale", "10")])
 @pytest.mark.parametrize("world", ["warehouse", "sparse"])
 def test_env_arguments_out_of_range_are_one_line_errors(world, argument, value):
     with pytest.raises(ConfigError, match=f"^{argument}: "):
         gym.make("flatland/Nav-v0", world=world, **{argument: value})
+
+
+def test_python_arguments_are_checked_when_the_env_is_made_and_numpy_numbers_accepted():
+    """A NaN or a string weight in a mix failed at the first reset with NumPy's error; a list of
+    scenarios mixing kinematics at whichever reset drew the odd one; float32 was no number."""
+    from common.scenario import RobotProfile
+
+    for weights in ({"sparse": float("nan"), "open": 1}, {"sparse": float("inf")}, {"sparse": "1"}):
+        with pytest.raises(ConfigError, match=r"^world: got .*; a mix needs at least one kind, each with a finite weight"):
+            gym.make("flatland/Nav-v0", world=weights)
+    with pytest.raises(ConfigError, match=r"^world: scenarios of robots with kinematics diff, omni; an env's action"):
+        gym.make("flatland/Nav-v0", world=[OPEN, OPEN.model_copy(update={"robot": RobotProfile(kinematics="omni")})])
+    assert gym.make("flatland/Nav-v0", world=OPEN, goal_threshold=np.float32(0.25)).unwrapped.task.threshold == (0.25, 0.25)
+    env = gym.make("flatland/Nav-v0", world=OPEN, robot=RobotProfile(v_max=2.0, radius=0.15))
+    env.reset(seed=0)
+    assert env.unwrapped.scenario.robot.v_max == 2.0 and env.unwrapped.scenario.robot.radius == 0.15
