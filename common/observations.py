@@ -118,6 +118,10 @@ LIDAR43_BEAMS = 36
 DEFAULT_GOAL_DISTANCE_SCALE = 10.0
 
 
+def _remembers_nothing() -> None:
+    """What a layout without memory forgets at an episode's start."""
+
+
 @dataclass(frozen=True)
 class ObservationLayout:
     """A named layout: its Box space, the function that fills it, (for a layout with memory) the
@@ -127,11 +131,19 @@ class ObservationLayout:
     name: str
     space: spaces.Box
     compute: Callable[[Readings, tuple[float, float]], np.ndarray]
-    forget: Callable[[], None] = lambda: None
+    forget: Callable[[], None] = _remembers_nothing
     take_route: Callable[[Route], None] | None = None
 
     def __call__(self, readings: Readings, goal: tuple[float, float]) -> np.ndarray:
         return self.compute(readings, goal)
+
+    def __deepcopy__(self, memo: dict) -> "ObservationLayout":
+        # Immutable but for the memory its closures hold (the last scan, the episode's route): a
+        # copy would share that memory, two envs feeding one.
+        if self.forget is not _remembers_nothing:
+            raise TypeError(f"the {self.name} layout remembers each episode in closures a copy would share; "
+                            "make another env (gym.make) instead of copying one")
+        return self
 
     def reset(self) -> None:
         """Start a new episode (call before its first observation)."""

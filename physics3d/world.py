@@ -308,6 +308,16 @@ class World:
             contact=contact,
         )
 
+    def __deepcopy__(self, memo: dict) -> "World":
+        # A copy would drive the same PyBullet client: the original's robot moved with it, and
+        # closing either closed both.
+        raise TypeError("a physics3d World is a PyBullet client, which cannot be copied; make another "
+                        "(gym.make, or World(scenario)) instead")
+
+    def __reduce__(self):
+        raise TypeError("a physics3d World is a PyBullet client, which cannot be pickled; pass the scenario "
+                        "and build the World where it is used")
+
     def close(self) -> None:
         """Disconnect the physics client (the GUI window closes)."""
         if self.client is not None and p.isConnected(self.client):

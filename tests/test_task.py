@@ -210,3 +210,30 @@ def test_python_arguments_are_checked_when_the_env_is_made_and_numpy_numbers_acc
     env = gym.make("flatland/Nav-v0", world=OPEN, robot=RobotProfile(v_max=2.0, radius=0.15))
     env.reset(seed=0)
     assert env.unwrapped.scenario.robot.v_max == 2.0 and env.unwrapped.scenario.robot.radius == 0.15
+
+
+def test_what_a_copy_would_share_refuses_to_be_copied():
+    """A deep copy of a 3D env drove the same PyBullet client (the original's robot moved, and
+    closing one closed both); a copy of a lidar79_motion env shared its last scan."""
+    import copy
+    import pickle
+
+    import physics3d  # noqa: F401  (registers the 3D env)
+
+    three_d = gym.make("physics3d/WarehouseNav-v0", world=OPEN)
+    three_d.reset(seed=0)
+    with pytest.raises(TypeError, match="a physics3d World is a PyBullet client, which cannot be copied"):
+        copy.deepcopy(three_d)
+    with pytest.raises(TypeError, match="a physics3d World is a PyBullet client, which cannot be pickled"):
+        pickle.dumps(three_d.unwrapped.world)
+    three_d.close()
+    moving = gym.make("flatland/Nav-v0", world=OPEN, observation="lidar79_motion")
+    moving.reset(seed=0)
+    with pytest.raises(TypeError, match="the lidar79_motion layout remembers each episode in closures a copy would share"):
+        copy.deepcopy(moving)
+    # A layout without memory copies, and the copy runs the original's episode.
+    plain = gym.make("flatland/Nav-v0", world=OPEN, observation="lidar43_log")
+    plain.reset(seed=0)
+    twin = copy.deepcopy(plain)
+    action = np.array([1.0, 0.2], dtype=np.float32)
+    assert all(np.array_equal(plain.step(action)[0], twin.step(action)[0]) for _ in range(5))
