@@ -106,20 +106,25 @@ def test_a_full_disk_stops_a_run_in_one_line_and_it_resumes(tmp_path, capsys, mo
 
     from common.curriculum import training
 
-    out, saved = tmp_path / "run", training.save_policy
+    out, saved = tmp_path / "run", training.policy_writer
     calls = []
 
-    def fills_the_disk(model, path, *args, **kwargs):
-        calls.append(path)
-        if len(calls) == 3:  # the second evaluation's best checkpoint
-            raise OSError(errno.ENOSPC, "No space left on device", str(path))
-        return saved(model, path, *args, **kwargs)
+    def fills_the_disk(*args, **kwargs):
+        calls.append(args)
+        write = saved(*args, **kwargs)
+        if len(calls) != 2:
+            return write
 
-    monkeypatch.setattr(training, "save_policy", fills_the_disk)
+        def full(tmp):  # the second evaluation's checkpoint
+            raise OSError(errno.ENOSPC, "No space left on device", str(tmp))
+
+        return full
+
+    monkeypatch.setattr(training, "policy_writer", fills_the_disk)
     assert main(["run", str(TINY), "--out", str(out), "--no-progress"]) == 2
     error = capsys.readouterr().err
     assert error.count("\n") == 1 and "No space left on device" in error and "--resume" in error
-    monkeypatch.setattr(training, "save_policy", saved)
+    monkeypatch.setattr(training, "policy_writer", saved)
     assert main(["run", str(TINY), "--out", str(out), "--no-progress", "--resume"]) == 0
     assert (out / "report.md").exists()
 

@@ -77,3 +77,50 @@ def test_a_resumed_stage_sets_its_optimiser_kernels_after_loading_their_saved_st
     Runner(config, out, resume=True, progress=False).run()
     assert [call[0] for call in calls] == ["load_weights", "use_optimizer_kernels"]
     assert calls[1][1:] == ("fused",)  # the resumed stage's own setting
+
+
+def test_a_kill_while_a_checkpoint_is_written_leaves_weights_and_replay_buffer_together(tmp_path, monkeypatch):
+    """The replay buffer was written before the weights: a kill between the two left a buffer a
+    checkpoint ahead of them, which the resume trained on without a word."""
+    import numpy as np
+
+    from common.curriculum import training
+
+    data = yaml.safe_load(TINY.read_text())
+    data["stages"] = [{**data["stages"][0], "algorithm": "sac", "normalize": False, "n_envs": 2, "budget": 400,
+                       "max_steps": 40, "hyperparams": {"learning_starts": 50, "buffer_size": 1000, "batch_size": 32},
+                       "eval": {"suite": "open", "episodes": 2, "every": 200}}]
+    config, out = curriculum_from_mapping(data, TINY), tmp_path / "run"
+    written = training.policy_writer
+    checkpoints = []
+
+    def killed_at_the_second(model, manifest, normalizer=None):
+        checkpoints.append(model.num_timesteps)
+        write = written(model, manifest, normalizer)
+        if len(checkpoints) < 2:
+            return write
+
+        def dies(tmp):
+            write(tmp)
+            raise _Interrupted  # the weights' temporary written, the set not yet renamed
+
+        return dies
+
+    monkeypatch.setattr(training, "policy_writer", killed_at_the_second)
+    with pytest.raises(_Interrupted):
+        Runner(config, out, progress=False).run()
+    checkpoint = out / "stages" / "0-open" / "checkpoints"
+    steps = read_manifest(checkpoint / "last.zip")["timesteps"]
+    with np.load(checkpoint / "last_replay.npz") as replay:
+        # The first checkpoint's buffer: 200 steps of two envs, less the step whose transition SB3
+        # stores after the callback that saved (the killed set's held 199 rows).
+        assert steps == 200 and int(replay["pos"]) == 99
+    assert sorted(p.name for p in checkpoint.iterdir()) == ["last.zip", "last_replay.npz"]  # no temporaries
+    # A kill -9 leaves its temporaries (as large as the buffer); the resume clears them.
+    (checkpoint / ".last_replay.npz.k1ll3d.tmp").write_bytes(b"a killed write")
+    (checkpoint.parent / ".best.zip.k1ll3d.tmp").write_bytes(b"a killed write")
+    (checkpoint / "notes.txt").write_text("the user's")
+    monkeypatch.undo()
+    Runner(config, out, resume=True, progress=False).run()
+    assert sorted(p.name for p in checkpoint.iterdir()) == ["last.zip", "last_replay.npz", "notes.txt"]
+    assert not (checkpoint.parent / ".best.zip.k1ll3d.tmp").exists()

@@ -54,7 +54,7 @@ import math
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Callable, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator
@@ -195,6 +195,12 @@ def save_policy(model, path: str | Path, manifest: dict[str, Any], normalizer: N
 
     The manifest gets the format, the network (from the model itself) and its step count.
     """
+    return atomic_write(Path(path), policy_writer(model, manifest, normalizer))
+
+
+def policy_writer(model, manifest: dict[str, Any], normalizer: Normalizer | None = None) -> Callable[[Path], None]:
+    """What :func:`save_policy` writes, as a function of the file to write it to (for
+    :func:`~common.atomic.atomic_write_all`, which writes a set of files together)."""
     manifest = {"format": FORMAT, **manifest_network(model), "timesteps": int(model.num_timesteps),
                 "n_updates": int(getattr(model, "_n_updates", 0)), **manifest}
     Manifest.model_validate(manifest)  # never write a file this project would refuse to read
@@ -210,7 +216,7 @@ def save_policy(model, path: str | Path, manifest: dict[str, Any], normalizer: N
             if normalizer is not None:
                 archive.writestr(NORMALIZER, json.dumps(normalizer.to_json()))
 
-    return atomic_write(Path(path), write)
+    return write
 
 
 class PolicyFile:

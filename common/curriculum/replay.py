@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import zipfile
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -34,6 +35,12 @@ def _filled(buffer, pos: int, full: bool) -> int:
 def save_replay(buffer, path: str | Path) -> Path:
     """Write a buffer's position and its arrays' filled rows atomically (the whole 300k-row buffer
     of a SAC stage was 109 MB after 8,000 transitions)."""
+    return atomic_write(Path(path), replay_writer(buffer))
+
+
+def replay_writer(buffer) -> Callable[[Path], None]:
+    """What :func:`save_replay` writes, as a function of the file to write it to (written with
+    the checkpoint as one set: :func:`~common.atomic.atomic_write_all`)."""
     rows = _filled(buffer, buffer.pos, buffer.full)
 
     def write(tmp: Path) -> None:
@@ -41,7 +48,7 @@ def save_replay(buffer, path: str | Path) -> Path:
             np.savez(handle, pos=np.array(buffer.pos), full=np.array(buffer.full),
                      **{name: array[:rows] for name, array in _arrays(buffer).items()})
 
-    return atomic_write(Path(path), write)
+    return write
 
 
 _SLACK = 64 * 1024  # a file's bytes beyond its arrays': zip records and .npy headers (about 250 bytes a member)

@@ -25,7 +25,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from common.atomic import atomic_write
+from common.atomic import atomic_write, is_temporary_of
 from common.errors import ConfigError
 from common.files import read_bytes, read_text
 
@@ -63,6 +63,14 @@ class StagePaths:
     @property
     def policy(self) -> Path:
         return self.root / "policy.zip"
+
+    def clear_temporaries(self) -> None:
+        """Remove what a killed write of this stage's files left (a replay buffer's is as large as
+        the buffer: 109 MB for a SAC stage's), before the stage goes on."""
+        for folder in {self.last.parent, self.root}:
+            names = [path.name for path in (self.last, self.replay, self.best, self.policy) if path.parent == folder]
+            for leftover in (p for p in (folder.iterdir() if folder.is_dir() else ()) if is_temporary_of(p.name, names)):
+                leftover.unlink()
 
     @property
     def tensorboard(self) -> Path:

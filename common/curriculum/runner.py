@@ -243,6 +243,7 @@ class Runner:
         venv = make_vec_env(_env_class(stage), n_envs=stage.n_envs, seed=seed, env_kwargs=stage_env_kwargs(stage),
                             vec_env_cls=vec_env_class(stage.vec_env))
         resuming = self.resume and paths.last.exists()
+        paths.clear_temporaries()
         if stage.normalize:
             venv = VecNormalize(venv, norm_obs=True, norm_reward=False)
         model = algorithm_class(stage.algorithm)(policy_class(stage.algorithm), venv, seed=seed, device=self.device, verbose=0,

@@ -9,9 +9,9 @@ from typing import Callable, Protocol
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecNormalize
 
-from common.atomic import atomic_write
-from common.curriculum.policy_file import Normalizer, save_policy
-from common.curriculum.replay import save_replay
+from common.atomic import atomic_write, atomic_write_all
+from common.curriculum.policy_file import Normalizer, policy_writer, save_policy
+from common.curriculum.replay import replay_writer
 from common.curriculum.run_directory import EvalLog, StagePaths
 from common.curriculum.schema import CurriculumConfig, StageSpec
 from common.curriculum.stage import manifest_for
@@ -89,10 +89,14 @@ class CurriculumCallback(BaseCallback):
         if summary.success_rate > self.best_success or not self.paths.best.exists():
             self.best_success = max(self.best_success, summary.success_rate)
             save_policy(model, self.paths.best, manifest, normalizer)
+        # The envs' generators travel with the checkpoint, so a resume continues their scenario
+        # sequence; the replay buffer is written with it as one set (a kill between the two left a
+        # buffer a checkpoint ahead of the weights, which a resume trained on without a word).
+        checkpoint = {self.paths.last: policy_writer(model, {**manifest, "env_rng": model.get_env().env_method("rng_state")},
+                                                     normalizer)}
         if hasattr(model, "replay_buffer"):
-            save_replay(model.replay_buffer, self.paths.replay)
-        # The envs' generators travel with the checkpoint, so a resume continues their scenario sequence.
-        save_policy(model, self.paths.last, {**manifest, "env_rng": model.get_env().env_method("rng_state")}, normalizer)
+            checkpoint[self.paths.replay] = replay_writer(model.replay_buffer)
+        atomic_write_all(checkpoint)
         if self.runner.on_evaluation is not None:
             self.runner.on_evaluation(row)  # after the checkpoint: a sweep may stop the trial here
         threshold = self.stage.promote.success_rate if self.stage.promote else None
