@@ -353,7 +353,8 @@ def _started_run(tmp_path: Path) -> Path:
     out = tmp_path / "run"
     runner = Runner(load_curriculum(TINY), out)
     runner.prepare()
-    runner.eval_log.append({"stage": "open", "timesteps": 1024, "wall_time": 1.0, "success_rate": 0.5})
+    runner.eval_log.append({"stage": "open", "timesteps": 1024, "wall_time": 1.0, "success_rate": 0.5, "collision_rate": 0.5,
+                            "timeout_rate": 0.0, "stuck_rate": 0.0, "spl": 0.4, "mean_steps": ""})
     runner.release()
     return out
 

@@ -125,7 +125,8 @@ def prepared_run(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("fuzz") / "run"
     runner = Runner(load_curriculum(ROOT / "tests/data/tiny_curriculum.yaml"), out)
     runner.prepare()
-    runner.eval_log.append({"stage": "open", "timesteps": 1024, "wall_time": 1.0, "success_rate": 0.5})
+    runner.eval_log.append({"stage": "open", "timesteps": 1024, "wall_time": 1.0, "success_rate": 0.5, "collision_rate": 0.5,
+                            "timeout_rate": 0.0, "stuck_rate": 0.0, "spl": 0.4, "mean_steps": ""})
     runner.release()
     return out
 

@@ -284,7 +284,8 @@ def test_a_run_that_died_before_its_first_checkpoint_starts_afresh(tmp_path):
         assert again.prepare() == {"done": [], "stages": {}}
         again.release()
     # A directory with an evaluation in it holds progress: only --resume may continue it.
-    again.eval_log.append({"stage": "open", "timesteps": 1024, "wall_time": 1.0, "success_rate": 0.5})
+    again.eval_log.append({"stage": "open", "timesteps": 1024, "wall_time": 1.0, "success_rate": 0.5, "collision_rate": 0.5,
+                            "timeout_rate": 0.0, "stuck_rate": 0.0, "spl": 0.4, "mean_steps": ""})
     with pytest.raises(ConfigError, match="not empty"):
         Runner(config, out).prepare()
     assert (out / "eval.csv").read_text().count("\n") == 2  # nothing lost by the refusal

@@ -71,15 +71,21 @@ def test_an_out_that_cannot_be_a_run_directory_is_one_line(tmp_path, capsys, mak
     assert (tmp_path / "a-file").read_text() == "mine\n"
 
 
+def _row(stage: str, timesteps: int, wall_time: float, success_rate: float) -> dict:
+    """An evaluation row as a run writes it (every column)."""
+    return {"stage": stage, "timesteps": timesteps, "wall_time": wall_time, "success_rate": success_rate,
+            "collision_rate": 1.0 - success_rate, "timeout_rate": 0.0, "stuck_rate": 0.0, "spl": 0.4, "mean_steps": ""}
+
+
 def test_the_csv_files_end_every_line_alike(tmp_path):
     from common.curriculum.comparison import write_csv
     from common.curriculum.run_directory import EvalLog
     from common.evaluation import Episode, summarise
 
     log = EvalLog(tmp_path / "eval.csv")
-    log.append({"stage": "open", "timesteps": 1024, "wall_time": 1.0, "success_rate": 0.5})
+    log.append(_row("open", 1024, 1.0, 0.5))
     log.truncate("open", 2048)
-    log.append({"stage": "open", "timesteps": 2048, "wall_time": 2.0, "success_rate": 0.75})
+    log.append(_row("open", 2048, 2.0, 0.75))
     episode = Episode("a", "s", 0, "success", 10, 1.0, 1.0, 1.0, 0.1)
     written = write_csv([summarise("a", [episode, episode])], tmp_path / "episodes.csv")
     for path in (tmp_path / "eval.csv", written):
@@ -91,7 +97,7 @@ def test_a_row_torn_by_a_kill_is_dropped_when_the_log_is_reopened(tmp_path):
     from common.curriculum.run_directory import EvalLog
 
     log = EvalLog(tmp_path / "eval.csv")
-    log.append({"stage": "sparse", "timesteps": 1024, "wall_time": 1.0, "success_rate": 0.5})
+    log.append(_row("sparse", 1024, 1.0, 0.5))
     with (tmp_path / "eval.csv").open("a") as handle:
         handle.write("spars")  # killed mid-append
     reopened = EvalLog(tmp_path / "eval.csv")
@@ -184,15 +190,21 @@ def test_render_to_a_directory_is_one_line(tmp_path, capsys):
     ("run.json", '{"seed": 0}\n', "run.json: git_commit: missing"),
     ("eval.csv", "stage,timesteps\nopen,1024\n", "eval.csv: line 1: expected the header"),
     ("eval.csv", None, "eval.csv: line 3: not an evaluation row"),
+    # Read by the report only, they gave tracebacks.
+    ("eval.csv", "spl", "eval.csv: line 3: not an evaluation row"),
+    ("state.json", '{"done": ["open"], "stages": {"open": {}}}\n', "not the state this project writes"),
+    ("run.json", '{"git_commit": null, "package_version": "0.1.0"}\n', "run.json: device: missing"),
 ])
 def test_a_damaged_run_state_is_refused_in_one_line_on_resume(tmp_path, capsys, name, content, expected):
     out = tmp_path / "run"
     runner = Runner(load_curriculum(TINY), out)
     runner.prepare()
-    runner.eval_log.append({"stage": "open", "timesteps": 1024, "wall_time": 1.0, "success_rate": 0.5})
+    runner.eval_log.append(_row("open", 1024, 1.0, 0.5))
     runner.release()
     if content is None:
         content = (out / name).read_text() + "open,2048,nan,0.5,0,0,0,0,\n"
+    elif content == "spl":
+        content = (out / name).read_text() + "open,2048,2.0,0.5,0,0,0,abc,\n"
     (out / name).write_text(content)
     assert main(["run", str(TINY), "--out", str(out), "--resume", "--no-progress"]) == 2
     error = capsys.readouterr().err

@@ -97,7 +97,8 @@ class EvalLog:
             atomic_write(path, lambda tmp: tmp.write_bytes(whole))
 
     def rows(self) -> list[dict]:
-        """The rows, each checked: a stage name, whole timesteps, finite wall time and rates."""
+        """The rows, each checked: a stage name, whole timesteps, finite wall time, rates and SPL,
+        and mean steps finite or empty (the report draws every column)."""
         text = read_text(self.path, MAX_EVAL_BYTES, "this run's eval.csv")
         reader = csv.DictReader(io.StringIO(text))
         if reader.fieldnames != EVAL_FIELDS:
@@ -106,7 +107,8 @@ class EvalLog:
         for line, row in enumerate(rows, start=2):
             try:
                 good = bool(row["stage"]) and int(row["timesteps"]) >= 0 and all(
-                    math.isfinite(float(row[key])) for key in ("wall_time", "success_rate"))
+                    math.isfinite(float(row[key])) for key in EVAL_FIELDS[2:-1]) and (
+                    row["mean_steps"] == "" or math.isfinite(float(row["mean_steps"])))
             except (TypeError, ValueError):
                 good = False
             if not good:

@@ -84,8 +84,23 @@ def _is_state(state: object, config: CurriculumConfig) -> bool:
         return False
     names = [stage.name for stage in config.stages]
     done, results = state["done"], state["stages"]
-    return (done == names[: len(done)] and all(isinstance(results.get(name), dict) for name in done)
-            and set(results) <= set(names))
+    return done == names[: len(done)] and all(_is_result(results.get(name)) for name in done) and set(results) <= set(names)
+
+
+_NUMBER = (int, float)
+# A finished stage's result, as the report and the closing lines read it.
+_RESULT_FIELDS = {"timesteps": int, "wall_seconds": _NUMBER, "steps_per_second": _NUMBER, "promoted": bool,
+                  "policy": str, "final": dict}
+_FINAL_FIELDS = {"success_rate": _NUMBER, "collision_rate": _NUMBER, "timeout_rate": _NUMBER, "stuck_rate": _NUMBER,
+                 "spl": _NUMBER, "episodes": int, "success_ci95": list, "mean_steps": (*_NUMBER, type(None))}
+
+
+def _is_result(result: object) -> bool:
+    """Whether ``result`` is a finished stage's result as a run writes it."""
+    if not isinstance(result, dict) or not all(isinstance(result.get(k), t) for k, t in _RESULT_FIELDS.items()):
+        return False
+    final = result["final"]
+    return all(isinstance(final.get(k, ...), t) for k, t in _FINAL_FIELDS.items()) and len(final["success_ci95"]) == 2
 
 
 def _purge_tensorboard_after(log_dir: Path, run_name: str, step: int) -> None:
@@ -179,6 +194,9 @@ class Runner:
         provenance = read_json(self.out / "run.json", MAX_STATE_BYTES, "this run's run.json")
         if not isinstance(provenance, dict) or not isinstance(provenance.get("git_commit", 0), (str, type(None))):
             raise ConfigError(self.out / "run.json", "git_commit", "missing; the run directory is damaged")
+        for key in ("device", "package_version"):  # the report's first line reads them
+            if not isinstance(provenance.get(key), str):
+                raise ConfigError(self.out / "run.json", key, "missing; the run directory is damaged")
         self.commit = provenance["git_commit"]
         return state
 
