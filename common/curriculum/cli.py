@@ -436,9 +436,8 @@ def _given_env_kwargs(args: argparse.Namespace) -> dict:
     """``--env-kwargs`` as a mapping: a key given twice is refused, as a key twice in YAML is
     (the last would silently win)."""
     pairs = list(args.env_kwargs or [])
-    keys = [key for key, _ in pairs]
-    for key in keys:
-        if keys.count(key) > 1:
+    for key, count in Counter(key for key, _ in pairs).items():
+        if count > 1:
             raise ConfigError(None, f"--env-kwargs.{key}", "given twice; allowed: each key once")
     return dict(pairs)
 

@@ -67,10 +67,11 @@ class StagePaths:
     def clear_temporaries(self) -> None:
         """Remove what a killed write of this stage's files left (a replay buffer's is as large as
         the buffer: 109 MB for a SAC stage's), before the stage goes on."""
-        for folder in {self.last.parent, self.root}:
-            names = [path.name for path in (self.last, self.replay, self.best, self.policy) if path.parent == folder]
-            for leftover in (p for p in (folder.iterdir() if folder.is_dir() else ()) if is_temporary_of(p.name, names)):
-                leftover.unlink()
+        files = (self.last, self.replay, self.best, self.policy)
+        for folder in {file.parent for file in files if file.parent.is_dir()}:
+            for leftover in folder.iterdir():
+                if is_temporary_of(leftover.name, [file.name for file in files]):
+                    leftover.unlink()
 
     @property
     def tensorboard(self) -> Path:

@@ -47,10 +47,10 @@ from common.observations import LAYOUTS
 from common.rewards import resolve_reward_spec
 from common.scenario import pydantic_error
 from common.task import MAX_EPISODES, MAX_STEPS, check_env_kwargs
-
-MAX_BUDGET = 10**10  # a stage's env steps: days on a cluster; a typo's 10^29 is refused, not trained toward
 from common.tiers import TIERS
 from common.yaml_io import read_yaml_mapping
+
+MAX_BUDGET = 10**10  # a stage's env steps: days on a cluster; a typo's 10^29 is refused, not trained toward
 
 
 
