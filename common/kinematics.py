@@ -15,6 +15,12 @@ import numpy as np
 from numba.extending import register_jitable
 
 
+record = tuple.__new__
+"""``record(Cls, (field, ...))``: a NamedTuple from every one of its fields, built in C. Calling
+the class runs a Python-level ``__new__`` (0.31 µs against 0.14 for a pose), and each env step
+builds six records: the hot paths use this."""
+
+
 class Pose2D(NamedTuple):
     """A planar pose: position in metres, yaw in radians (counter-clockwise from +x)."""
 

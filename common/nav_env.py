@@ -13,7 +13,7 @@ import numpy as np
 
 from common.actions import ActionMapping
 from common.info import Info
-from common.kinematics import wrap_angle
+from common.kinematics import record, wrap_angle
 from common.observations import DEFAULT_GOAL_DISTANCE_SCALE, ObservationLayout, make_layout
 from common.readings import Readings, nearest_clearance, nearest_return
 from common.robots import footprint_reach
@@ -25,6 +25,12 @@ from common.scenario import Scenario
 from common.sources import ScenarioSource
 from common.task import DEFAULT_MAX_STEPS, GoalThreshold, Task
 from common.tiers import WorldLike, tier_source
+
+
+ENV_REGISTRATION = {"order_enforce": False, "disable_env_checker": True}
+"""How both tiers register their env: ``gym.make`` adds no wrappers. The env refuses a step
+before reset (or after an episode ended) itself, and the tests check it with gymnasium's and
+stable-baselines3's env checkers; the two wrappers cost 2 µs of flatland's 17 µs step."""
 
 
 class NavigationEnv(gym.Env):
@@ -173,8 +179,8 @@ class NavigationEnv(gym.Env):
         if self._reads_route:
             previous_route, self._route_distance = self._route_distance, self._route.distance(*readings.pose[:2])
             route_gain = previous_route - self._route_distance
-        ctx = StepContext(task.distance, previous, bearing, v, w, nearest_return(readings.lidar), readings.collided, reached,
-                          clearance, route_gain)
+        ctx = record(StepContext, (task.distance, previous, bearing, v, w, nearest_return(readings.lidar),
+                                   readings.collided, reached, clearance, route_gain))
         reward, shares = self.reward(ctx)
         # A crash is a termination, not a truncation: its value must not bootstrap from the next state.
         terminated = reached or outcome == "collision"

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from gymnasium.envs.registration import register, registry
 
+from common.nav_env import ENV_REGISTRATION
 from common.world_file import WorldFile
 from flatland.world import World
 
@@ -24,4 +25,5 @@ def load_world(path: str | Path, seed: int | None = 0) -> World:
 
 
 if "flatland/Nav-v0" not in registry:
-    register(id="flatland/Nav-v0", entry_point="flatland.env:NavEnv")
+    register(id="flatland/Nav-v0", entry_point="flatland.env:NavEnv",
+             **ENV_REGISTRATION)

@@ -22,7 +22,7 @@ import pymunk
 from common.actuation import Actuator, WheelDynamics
 from common.conditions import Conditions
 from common.drive import Drive, body_euler
-from common.kinematics import INTEGRATORS, Pose2D, WheelOdometry, nan_command, wheel_speeds, wrap_angle
+from common.kinematics import INTEGRATORS, Pose2D, WheelOdometry, nan_command, record, wheel_speeds, wrap_angle
 from common.motion.movers import Movers, mover_generator
 from flatland.polygons import convex_pieces
 from common.readings import Contact, Imu, Odometry, Readings, frozen, mover_fault
@@ -378,9 +378,10 @@ class World:
             if not clear:
                 return None
             touched = movers.settled(row, wanders)
-        x, y, yaw, odometry_x, odometry_y, odometry_yaw, odometry.v, odometry.w = moved.tolist()
-        self.pose = Pose2D(x, y, yaw)
-        odometry.pose = Pose2D(odometry_x, odometry_y, odometry_yaw)
+        values = moved.tolist()  # x, y, yaw, then the odometry's x, y, yaw, v, w
+        self.pose = record(Pose2D, values[:3])
+        odometry.pose = record(Pose2D, values[3:6])
+        odometry.v, odometry.w = values[6], values[7]
         return (lidar.finish(ranges) if scan else ranges), touched
 
     def _clip(self, v: float, w: float) -> tuple[float, float]:
@@ -475,12 +476,10 @@ class World:
     def _read(self, acceleration: float, ranges: np.ndarray, contact: Contact | None = None) -> Readings:
         v, w = self.velocity
         odometry = self.odometry
-        # Fields by position (pose, velocity, odometry, lidar, imu, collided, time): by keyword the
-        # record costs twice as much to build, once a step.
-        if self.movers is None:
-            return Readings(self.pose, self.velocity, Odometry(odometry.pose, odometry.v, odometry.w), frozen(ranges),
-                            Imu((acceleration, v * w, GRAVITY), (0.0, 0.0, w)), self._touching_static,
-                            self.steps * self._dt)
-        return Readings(self.pose, self.velocity, Odometry(odometry.pose, odometry.v, odometry.w), frozen(ranges),
-                        Imu((acceleration, v * w, GRAVITY), (0.0, 0.0, w)), contact is not None, self.steps * self._dt,
-                        None, self.movers.states(), contact)
+        estimate = record(Odometry, (odometry.pose, odometry.v, odometry.w))
+        imu = record(Imu, ((acceleration, v * w, GRAVITY), (0.0, 0.0, w)))
+        movers, collided = (None, self._touching_static) if self.movers is None else \
+            (self.movers.states(), contact is not None)
+        # Every field, in order: pose, velocity, odometry, lidar, imu, collided, time, camera, movers, contact.
+        return record(Readings, (self.pose, self.velocity, estimate, frozen(ranges), imu, collided,
+                                 self.steps * self._dt, None, movers, contact))

@@ -11,6 +11,8 @@ import sys
 
 from gymnasium.envs.registration import register, registry
 
+from common.nav_env import ENV_REGISTRATION
+
 
 def _import_pybullet_quietly() -> None:
     """Import PyBullet with descriptor 2 closed to it: its C module prints its build time on
@@ -33,4 +35,5 @@ from physics3d.world import World  # noqa: E402  (after PyBullet's quiet import)
 __all__ = ["World"]
 
 if "physics3d/WarehouseNav-v0" not in registry:
-    register(id="physics3d/WarehouseNav-v0", entry_point="physics3d.env:WarehouseNavEnv")
+    register(id="physics3d/WarehouseNav-v0", entry_point="physics3d.env:WarehouseNavEnv",
+             **ENV_REGISTRATION)

@@ -138,7 +138,8 @@ def test_a_closed_env_refuses_to_step_or_reset_in_both_tiers(env_id):
 def test_an_env_never_reset_refuses_to_step_in_both_tiers(env_id):
     import physics3d  # noqa: F401  (registers the 3D env)
 
-    env = gym.make(env_id, world="open").unwrapped  # past gymnasium's own order check
+    env = gym.make(env_id, world="open")
+    assert env is env.unwrapped  # registered without wrappers: the env's own order check is the only one
     with pytest.raises(gym.error.ResetNeeded, match=r"step\(\) before reset\(\)"):
         env.step(env.action_space.sample())
     env.reset(seed=0)
