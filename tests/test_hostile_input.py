@@ -189,6 +189,14 @@ def test_a_pickle_in_place_of_weights_is_refused_without_running(untrained_polic
      "env_kwargs: robot_family: not a physics3d env argument"),
     (lambda m: m.update(env_kwargs={"resample": "yes"}), "env_kwargs: resample: got 'yes'; allowed: true or false"),
     (lambda m: m.update(env_kwargs={"lidar_noise": -1}), "nav_manifest.json: env_kwargs: lidar_noise: "),  # named once
+    # The policy's own test figure says where eval runs by default: a damaged one was ignored (sparse, seed 0).
+    (lambda m: m.update(final_eval={"suite": "cluttred", "first_seed": 100000, "episodes": 200}),
+     "nav_manifest.json: final_eval.suite: Input should be"),
+    (lambda m: m.update(final_eval={"suite": "sparse", "first_seed": True, "episodes": 200}),
+     "nav_manifest.json: final_eval.first_seed: Input should be a valid integer"),
+    (lambda m: m.update(final_eval={"suite": "sparse", "first_seed": 0, "episodes": 0}),
+     "nav_manifest.json: final_eval.episodes: Input should be greater than or equal to 1"),
+    (lambda m: m.update(final_eval=[1]), "nav_manifest.json: final_eval: "),
 ])
 @pytest.mark.parametrize("command", ["eval", "export"])
 def test_an_inconsistent_manifest_is_a_one_line_refusal(untrained_policy, tmp_path, capsys, change, expected, command):

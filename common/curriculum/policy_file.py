@@ -64,6 +64,7 @@ from common.atomic import atomic_write
 from common.curriculum.hyperparams import PolicyKwargs
 from common.errors import ConfigError
 from common.files import ZIP_DAMAGE, open_zip, parse_json, read_bytes, size_text, zip_damage
+from common.generators import SUITES
 from common.observations import LAYOUTS
 from common.task import MAX_STEPS
 from common.tiers import TIERS
@@ -81,6 +82,17 @@ MAX_UNCOMPRESSED_BYTES = 256 * 1024 * 1024
 MAX_TENSOR_RECORDS = 2048
 MAX_PICKLE_BYTES = 256 * 1024
 _EMPTY_ZIP = b"PK\x05\x06" + b"\0" * 18
+
+
+class FinalEval(BaseModel):
+    """A policy's own test figure (``final_eval``): where ``curriculum eval`` evaluates it by default.
+    The figures beside these three fields are kept as written."""
+
+    model_config = ConfigDict(frozen=True, extra="allow", allow_inf_nan=False)
+
+    suite: Literal[tuple(SUITES)]  # type: ignore[valid-type]
+    first_seed: Annotated[int, Field(strict=True, ge=0, lt=2**32)]
+    episodes: Annotated[int, Field(strict=True, ge=1, le=1_000_000)]
 
 
 class Manifest(BaseModel):
@@ -101,19 +113,13 @@ class Manifest(BaseModel):
     n_updates: Annotated[int, Field(ge=0)] = 0
     tier: Literal[TIERS] = "flatland"  # type: ignore[valid-type]  # where it trained last
     env_kwargs: dict[str, Any] = {}  # after tier: checked for it
+    final_eval: FinalEval | None = None  # written by the runner when the policy's stage ends
 
     @property
     def home(self) -> tuple[str, str, int, int] | None:
-        """(tier, suite, first seed, episodes) of the policy's own test figure (``final_eval``), if valid."""
-        from common.generators import SUITES
-
-        final, tier = getattr(self, "final_eval", None), self.tier
-        if not isinstance(final, dict):
-            return None
-        suite, seed, episodes = final.get("suite"), final.get("first_seed"), final.get("episodes")
-        whole = all(isinstance(n, int) and not isinstance(n, bool) for n in (seed, episodes))
-        valid = suite in SUITES and whole and 0 <= seed < 2**32 and 1 <= episodes <= 1_000_000
-        return (tier, suite, seed, episodes) if valid else None
+        """(tier, suite, first seed, episodes) of the policy's own test figure, if it has one."""
+        final = self.final_eval
+        return None if final is None else (self.tier, final.suite, final.first_seed, final.episodes)
 
     @field_validator("env_kwargs")
     @classmethod
