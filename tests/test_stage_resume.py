@@ -97,7 +97,7 @@ def test_a_kill_while_a_checkpoint_is_written_leaves_weights_and_replay_buffer_t
     def killed_at_the_second(model, manifest, normalizer=None):
         checkpoints.append(model.num_timesteps)
         write = written(model, manifest, normalizer)
-        if len(checkpoints) < 2:
+        if len(set(checkpoints)) < 2:  # the first checkpoint writes last.zip and best.zip
             return write
 
         def dies(tmp):
@@ -124,3 +124,37 @@ def test_a_kill_while_a_checkpoint_is_written_leaves_weights_and_replay_buffer_t
     Runner(config, out, resume=True, progress=False).run()
     assert sorted(p.name for p in checkpoint.iterdir()) == ["last.zip", "last_replay.npz", "notes.txt"]
     assert not (checkpoint.parent / ".best.zip.k1ll3d.tmp").exists()
+
+
+def test_a_kill_while_a_checkpoint_is_written_leaves_best_zip_from_the_training_kept(tmp_path, monkeypatch):
+    """best.zip was saved before the checkpoint: a kill between them left a best from the stretch
+    of training the resume discards (its row dropped from eval.csv), which became the policy."""
+    import dataclasses
+
+    from common.atomic import atomic_write_all
+    from common.curriculum import training
+
+    data = yaml.safe_load(TINY.read_text())
+    data["stages"] = [{**data["stages"][0], "budget": 1024, "max_steps": 40,
+                       "eval": {"suite": "open", "episodes": 2, "every": 512}}]
+    config, out = curriculum_from_mapping(data, TINY), tmp_path / "run"
+    evaluate, rates = Runner.evaluate_model, iter([0.5, 1.0])
+
+    def improving(self, *args, **kwargs):  # every evaluation a new best
+        return dataclasses.replace(evaluate(self, *args, **kwargs), success_rate=next(rates))
+
+    calls = []
+
+    def dies_at_the_second(writes):
+        calls.append(writes)
+        if len(calls) == 2:
+            raise _Interrupted  # killed before the second checkpoint's files are written
+        atomic_write_all(writes)
+
+    monkeypatch.setattr(Runner, "evaluate_model", improving)
+    monkeypatch.setattr(training, "atomic_write_all", dies_at_the_second)
+    with pytest.raises(_Interrupted):
+        Runner(config, out, progress=False).run()
+    stage = out / "stages" / "0-open"
+    assert read_manifest(stage / "checkpoints" / "last.zip")["timesteps"] == 512
+    assert read_manifest(stage / "best.zip")["timesteps"] == 512

@@ -10,7 +10,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecNormalize
 
 from common.atomic import atomic_write, atomic_write_all
-from common.curriculum.policy_file import Normalizer, policy_writer, save_policy
+from common.curriculum.policy_file import Normalizer, policy_writer
 from common.curriculum.replay import replay_writer
 from common.curriculum.run_directory import EvalLog, StagePaths
 from common.curriculum.schema import CurriculumConfig, StageSpec
@@ -86,17 +86,18 @@ class CurriculumCallback(BaseCallback):
         self.last_eval_at = timesteps
         manifest = manifest_for(self.runner.config, self.runner.commit, self.index, timesteps, self.wall_time(),
                                 {"suite": self.stage.eval.suite, "draw": "validation", **summary.to_json()})
-        if summary.success_rate > self.best_success or not self.paths.best.exists():
-            self.best_success = max(self.best_success, summary.success_rate)
-            save_policy(model, self.paths.best, manifest, normalizer)
         # The envs' generators travel with the checkpoint, so a resume continues their scenario
-        # sequence; the replay buffer is written with it as one set (a kill between the two left a
-        # buffer a checkpoint ahead of the weights, which a resume trained on without a word).
+        # sequence. The replay buffer and a new best are written with it as one set: a kill between
+        # them left a buffer a checkpoint ahead of the weights, which a resume trained on without a
+        # word, or a best.zip from the stretch of training the resume discards.
         checkpoint = {self.paths.last: policy_writer(model, {**manifest, "env_rng": model.get_env().env_method("rng_state")},
                                                      normalizer)}
         if hasattr(model, "replay_buffer"):
             checkpoint[self.paths.replay] = replay_writer(model.replay_buffer)
+        if summary.success_rate > self.best_success or not self.paths.best.exists():
+            checkpoint[self.paths.best] = policy_writer(model, manifest, normalizer)
         atomic_write_all(checkpoint)
+        self.best_success = max(self.best_success, summary.success_rate)
         if self.runner.on_evaluation is not None:
             self.runner.on_evaluation(row)  # after the checkpoint: a sweep may stop the trial here
         threshold = self.stage.promote.success_rate if self.stage.promote else None
