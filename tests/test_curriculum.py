@@ -517,3 +517,29 @@ def test_a_policy_trained_on_a_world_file_records_the_file_s_robot(tmp_path, tex
     config = curriculum_from_mapping(data, tmp_path / "c.yaml")
     robot = manifest_for(config, None, 0, 0, 0.0, None)["robot"]
     assert {key: robot[key] for key in expected} == expected, robot
+
+
+def test_a_report_interrupted_while_written_leaves_the_last_one_whole(tmp_path, monkeypatch):
+    """A resume rewrites report.md and learning_curve.png: a kill then must not leave half a file."""
+    from matplotlib.figure import Figure
+
+    from common.curriculum.report import write_report
+    from common.curriculum.schema import load_curriculum
+
+    config = load_curriculum(Path(__file__).parents[1] / "curricula" / "stage1_2d.yaml")
+    (tmp_path / "run.json").write_text(json.dumps({"device": "cpu", "package_version": "0", "git_commit": None}))
+    (tmp_path / "eval.csv").write_text("stage,timesteps,success_rate,spl\nsparse,1000,0.5,0.4\n")
+    write_report(tmp_path, config, {"stages": {}})
+    before = {name: (tmp_path / name).read_bytes() for name in ("report.md", "learning_curve.png")}
+    assert before["learning_curve.png"].startswith(b"\x89PNG")
+
+    def killed_while_drawing(figure, path, **kwargs):
+        Path(path).write_bytes(b"\x89PNG half")
+        raise KeyboardInterrupt
+
+    (tmp_path / "eval.csv").write_text("stage,timesteps,success_rate,spl\nsparse,1000,0.5,0.4\nsparse,2000,0.9,0.8\n")
+    monkeypatch.setattr(Figure, "savefig", killed_while_drawing)
+    with pytest.raises(KeyboardInterrupt):
+        write_report(tmp_path, config, {"stages": {}})
+    assert {name: (tmp_path / name).read_bytes() for name in before} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["eval.csv", "learning_curve.png", "report.md", "run.json"]

@@ -30,6 +30,7 @@ from typing import Any, Protocol
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from common.atomic import atomic_write_all
 from common.curriculum.policy_file import update_manifest
 from common.curriculum.run_directory import StagePaths
 from common.curriculum.schema import CurriculumConfig, StageSpec
@@ -116,8 +117,11 @@ def gather_evidence(runner: EvidenceHost, state: dict) -> dict[str, Any]:
                 row["steps_to_90"] = steps_to(row["curve"])
             per_seed[arm].append(row)
     evidence = _summary(per_seed, last.budget)
-    _figure(per_seed, out / "transfer.png", last.name)
-    _append_report(out / "report.md", evidence, per_seed, last.name)
+    report = out / "report.md"
+    text = report.read_text() + _report_section(evidence, per_seed, last.name)
+    # Written as one set (a kill leaves the run's own report whole): a resume writes them again.
+    atomic_write_all({out / "transfer.png": lambda tmp: _figure(per_seed, tmp, last.name),
+                      report: lambda tmp: tmp.write_text(text)})
     policy = out / state["stages"][last.name]["policy"]
     update_manifest(policy, {"transfer": {k: v for k, v in evidence.items() if k != "per_seed"}})
     return evidence
@@ -167,7 +171,7 @@ def _figure(per_seed: dict[str, list[dict[str, Any]]], path: Path, stage: str) -
     ax.legend(loc="lower right", fontsize=8)
     ax.set_title("transfer against training from scratch (band: range over seeds)", fontsize=9)
     figure.tight_layout()
-    figure.savefig(path)
+    figure.savefig(path, format="png")  # the format said: a temporary file's name does not end in .png
     return path
 
 
@@ -187,7 +191,8 @@ def _steps(rows: list[dict[str, Any]]) -> str:
     return f"{label} ({each})"
 
 
-def _append_report(path: Path, evidence: dict[str, Any], per_seed: dict[str, list[dict[str, Any]]], stage: str) -> None:
+def _report_section(evidence: dict[str, Any], per_seed: dict[str, list[dict[str, Any]]], stage: str) -> str:
+    """The transfer evidence's section of report.md."""
     transfer, scratch = per_seed["transfer"], per_seed["scratch"]
     lines = ["", f"## Transfer: `{stage}` from the previous stage's policy, against from scratch", "",
              f"{evidence['seeds']} seeds per arm, {evidence['budget']:,} `{stage}` steps each, the same validation "
@@ -201,5 +206,4 @@ def _append_report(path: Path, evidence: dict[str, Any], per_seed: dict[str, lis
         lines.append(f"| from scratch | {_percent(scratch, 'test_success')} | {_steps(scratch)} | "
                      f"{', '.join(str(round(r['wall_seconds'])) for r in scratch)} |")
     lines += ["", "![transfer against scratch](transfer.png)", ""]
-    with path.open("a") as handle:
-        handle.write("\n".join(lines))
+    return "\n".join(lines)

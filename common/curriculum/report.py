@@ -9,6 +9,7 @@ from pathlib import Path
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from common.atomic import atomic_write_all
 from common.curriculum.machine import describe
 from common.curriculum.schema import CurriculumConfig
 
@@ -33,14 +34,13 @@ def learning_curve(eval_csv: Path, path: Path) -> Path:
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))  # beside the axes: over them it hid points
     figure.tight_layout()
-    figure.savefig(path)
+    figure.savefig(path, format="png")  # the format said: a temporary file's name does not end in .png
     return path
 
 
 def write_report(out: Path, config: CurriculumConfig, state: dict) -> Path:
     """report.md: per stage, training figures and the final (test-draw) evaluation."""
     run = json.loads((out / "run.json").read_text())
-    learning_curve(out / "eval.csv", out / "learning_curve.png")
     lines = [f"# {config.name}", "",
              f"seed {config.seed}, device {run['device']}, package {run['package_version']}, commit {run['git_commit']}"
              + (f", on {on}" if (on := describe(run.get("machine"))) else ""), "",
@@ -62,5 +62,7 @@ def write_report(out: Path, config: CurriculumConfig, state: dict) -> Path:
               "evaluation; training env steps/s excludes the evaluations.", "",
               "![learning curve](learning_curve.png)", ""]
     path = out / "report.md"
-    path.write_text("\n".join(lines))
+    # One set, each file whole: a kill while they are written (a resume rewrites them) leaves the last ones.
+    atomic_write_all({out / "learning_curve.png": lambda tmp: learning_curve(out / "eval.csv", tmp),
+                      path: lambda tmp: tmp.write_text("\n".join(lines))})
     return path
