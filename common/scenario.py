@@ -526,14 +526,18 @@ class Scenario(Frozen):
                 out = np.minimum(out, sdf.min(axis=1))
         return out
 
+    def outside_problems(self, source: str | Path | None = None) -> list[ConfigError]:
+        """Where the start or the goal lies outside the world, as one-line errors."""
+        return [ConfigError(source, field, f"({x:g}, {y:g}) lies outside the world {self._extent()}")
+                for field, (x, y) in (("start", self.start[:2]), ("goal", self.goal)) if not self.world.contains(x, y)]
+
     def placement_problems(self, source: str | Path | None = None) -> list[ConfigError]:
         """Where the start or the goal is outside the world or inside (or, for the start, within
         the robot's radius of) an obstacle, as one-line errors."""
-        problems = []
+        problems = self.outside_problems(source)
         clearance = self.robot.bounding_radius
         for field, (x, y) in (("start", self.start[:2]), ("goal", self.goal)):
             if not self.world.contains(x, y):
-                problems.append(ConfigError(source, field, f"({x:g}, {y:g}) lies outside the world {self._extent()}"))
                 continue
             d = float(self.signed_distance(np.array([[x, y]]))[0])
             if d < (clearance if field == "start" else 0.0):

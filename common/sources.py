@@ -31,11 +31,20 @@ class ScenarioSource(Protocol):
     def draw(self, rng: np.random.Generator, resample: bool = False) -> Scenario: ...
 
 
+def _inside_its_world(scenario: Scenario, field: str) -> Scenario:
+    """A scenario written in Python (kind ``custom``) whose start and goal lie in its world: a goal
+    outside a walled world trained until every episode's truncation without a word. (Only these:
+    a generator's are inside by construction, and IR-SIM runs its files whatever their goals.)"""
+    if scenario.kind == "custom" and (problems := scenario.outside_problems()):
+        raise ConfigError(None, f"{field}.{problems[0].field}", f"scenario {quote(scenario.name)}: {problems[0].problem}")
+    return scenario
+
+
 class FixedSource:
     """Always the same scenario."""
 
     def __init__(self, scenario: Scenario) -> None:
-        self.scenario = scenario
+        self.scenario = _inside_its_world(scenario, "world")
         self.examples = [scenario]
 
     def draw(self, rng: np.random.Generator, resample: bool = False) -> Scenario:
@@ -52,6 +61,7 @@ class ListSource:
             if not isinstance(scenario, Scenario):
                 raise ConfigError(None, f"world.{index}", f"got {quote(scenario)}; allowed: a list of Scenario objects "
                                   "(several kinds: a mix such as {'sparse': 1, 'cluttered': 1})")
+            _inside_its_world(scenario, f"world.{index}")
         self.scenarios = self.examples = list(scenarios)
 
     def draw(self, rng: np.random.Generator, resample: bool = False) -> Scenario:

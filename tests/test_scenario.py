@@ -441,3 +441,20 @@ def test_a_boolean_in_a_robot_mapping_is_refused_where_a_number_belongs_and_kept
     with pytest.raises(ConfigError, match=r"^robot\.radius: got true; allowed: a number$"):
         robot_profile({"radius": True})
     assert robot_profile({"radius": 0.3, "static": True}).static
+
+
+@pytest.mark.parametrize("env_id", ["flatland/Nav-v0", "physics3d/WarehouseNav-v0"])
+def test_a_scenario_written_in_python_with_its_goal_outside_the_world_is_refused(env_id):
+    """Such a goal trained until every episode's truncation without a word."""
+    import gymnasium as gym
+
+    import flatland  # noqa: F401
+    import physics3d  # noqa: F401
+
+    with pytest.raises(ConfigError, match=r"^world\.goal: scenario 'scenario': \(12, 5\) lies outside the world \[0, 10\] x \[0, 10\]$"):
+        gym.make(env_id, world=Scenario(goal=(12.0, 5.0)))
+    with pytest.raises(ConfigError, match=r"^world\.1\.start: .* \(-1, 2\) lies outside the world"):
+        gym.make(env_id, world=[Scenario(), Scenario(start=(-1.0, 2.0, 0.0))])
+    # A generator's scenarios are left to their own acceptance rule (every suite stays as it was).
+    generated = next(iter(get_suite("sparse").scenarios(count=1, seed=0)))
+    gym.make(env_id, world=generated.model_copy(update={"goal": (12.0, 5.0)})).close()
