@@ -225,11 +225,12 @@ class Conditions(BaseModel):
 
     def draws(self, scenario: Scenario) -> bool:
         """Whether an episode of ``scenario`` (as conditioned) under these conditions draws random
-        numbers: sensor noise, or a knob given as a range. A world that draws nothing need not
-        reseed its generator per episode."""
+        numbers: sensor or motion noise, or a knob given as a range. A world that draws nothing
+        need not reseed its generator per episode."""
         ranges = (self.motor_scale, self.friction, self.mass_scale)
-        return (scenario.lidar.noise_std > 0.0 or scenario.robot.encoder_noise > 0.0 or bool(self.gyro_noise)
-                or bool(self.gyro_bias) or bool(self.accel_noise) or _varies(self.delay_range)
+        robot = scenario.robot
+        return (scenario.lidar.noise_std > 0.0 or robot.encoder_noise > 0.0 or robot.motion_noise is not None
+                or bool(self.gyro_noise) or bool(self.gyro_bias) or bool(self.accel_noise) or _varies(self.delay_range)
                 or any(_varies(r) for r in ranges if r is not None))
 
     def draw(self, rng: np.random.Generator) -> EpisodeDraw:

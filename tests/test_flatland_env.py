@@ -31,7 +31,8 @@ def test_reset_with_the_same_seed_replays_the_same_episodes(world):
     noisy = Scenario().model_copy(update={"lidar": Scenario().lidar.model_copy(update={"noise_std": 0.05})})
     # Each source of noise alone: a world reseeds its generator only where something draws from it.
     for kwargs in ({"world": world}, {"world": noisy}, {"world": world, "robot": {"encoder_noise": 0.05}},
-                   {"world": world, "motor_scale": (0.8, 1.2)}):
+                   {"world": world, "motor_scale": (0.8, 1.2)},
+                   {"world": world, "robot": {"motion_noise": [0.05, 0.01, 0.01, 0.05]}}):  # IR-SIM's alpha
         env = make(observation="lidar43", **kwargs)
         assert same(rollout(env, 3), rollout(env, 3))
         assert not same(rollout(env, 3), rollout(env, 4))
