@@ -137,21 +137,68 @@ def _manifest_with(**change):
     return rewrite
 
 
+def _with_node(op_type: str, domain: str = ""):
+    """A node of ``op_type`` added to the graph (unconnected: refused before anything runs it)."""
+    def change(model) -> None:
+        from onnx import helper
+
+        model.graph.node.append(helper.make_node(op_type, ["observation"], ["unused"], domain=domain))
+    return change
+
+
+def _external_weight(model) -> None:
+    """A weight stored in a file beside the model: onnxruntime read it from the working directory."""
+    from onnx import TensorProto
+
+    tensor = TensorProto(name="beside", data_type=TensorProto.UINT8, dims=[4], data_location=TensorProto.EXTERNAL)
+    for key, value in (("location", "secret.bin"), ("offset", "0"), ("length", "4")):
+        entry = tensor.external_data.add()
+        entry.key, entry.value = key, value
+    model.graph.initializer.append(tensor)
+
+
+def _nan_weight(model) -> None:
+    from onnx import numpy_helper
+
+    first = model.graph.initializer[0]
+    values = numpy_helper.to_array(first).copy()
+    values.flat[0] = np.nan
+    first.CopyFrom(numpy_helper.from_array(values, first.name))
+
+
+def _export_record(**change):
+    record = {"format": 1, "observation_size": 43, "normaliser_folded_in": False, "input": "observation",
+              "output": "action"}
+    return _set_metadata("nav_onnx", json.dumps({**record, **change}))
+
+
 @pytest.mark.parametrize(("case", "make", "field", "problem"), [
     ("truncated", lambda source, target: target.write_bytes(source.read_bytes()[:5000]) and target, None,
-     "not an ONNX model onnxruntime can run"),
+     "not an ONNX model"),
     ("not ONNX", lambda source, target: target.write_bytes(b"hello, robot\n" * 100) and target, None,
-     "not an ONNX model onnxruntime can run"),
+     "not an ONNX model"),
     ("no manifest", lambda source, target: _rewritten(source, target, _set_metadata("nav_manifest", None)),
      "nav_manifest", "missing from the metadata"),
     ("garbled manifest", lambda source, target: _rewritten(source, target, _set_metadata("nav_manifest", "{oops")),
      "nav_manifest", "not valid JSON"),
     ("unknown format", lambda source, target: _rewritten(source, target, _set_metadata("nav_onnx", '{"format": 9}')),
-     "nav_onnx: format", "allowed: 1"),
+     "nav_onnx: format", "Input should be 1"),
     ("another layout", lambda source, target: _rewritten(source, target, _manifest_with(observation="nav7")),
      "graph observation", "expected one float tensor 'observation' of (batch, 7)"),
     ("unknown policy key", lambda source, target: _rewritten(source, target, _manifest_with(policy_kwargs={"net_arc": [8]})),
      "nav_manifest: policy_kwargs.net_arc", "unknown key (did you mean 'net_arch'?); allowed: activation_fn"),
+    # What could run for as long, or build a tensor as large, as the file says (Loop, ConstantOfShape).
+    ("a loop", lambda source, target: _rewritten(source, target, _with_node("Loop")), "graph",
+     "operator Loop; allowed: Add, Clip, Div, Elu, Gelu, Gemm"),
+    ("a custom domain", lambda source, target: _rewritten(source, target, _with_node("Relu", "com.example")), "graph",
+     "operator com.example.Relu"),
+    ("an external weight", lambda source, target: _rewritten(source, target, _external_weight),
+     "graph weight 'beside'", "stored outside the file"),
+    ("a NaN weight", lambda source, target: _rewritten(source, target, _nan_weight), "graph weight", "not finite"),
+    ("a garbled export record", lambda source, target: _rewritten(source, target, _export_record(normaliser_folded_in="banana")),
+     "nav_onnx: normaliser_folded_in", "Input should be a valid boolean"),
+    ("another observation size", lambda source, target: _rewritten(source, target, _export_record(observation_size=99)),
+     "nav_onnx: observation_size", "99; the lidar43_log layout holds 43 values"),
 ])
 def test_a_damaged_or_mismatched_onnx_file_is_refused_in_one_line(exported, tmp_path, case, make, field, problem):
     from common.curriculum.onnx_policy import OnnxPolicy
@@ -160,7 +207,9 @@ def test_a_damaged_or_mismatched_onnx_file_is_refused_in_one_line(exported, tmp_
     path = make(source, tmp_path / "bad.onnx")
     with pytest.raises(ConfigError) as error:
         OnnxPolicy(path)
-    assert error.value.field == field and problem in error.value.problem, str(error.value)
+    # A field named in full, or by its start (a weight's field names the weight).
+    named = error.value.field == field or (field is not None and error.value.field.startswith(field + " "))
+    assert named and problem in error.value.problem, str(error.value)
     assert "\n" not in str(error.value)
 
 
@@ -214,3 +263,35 @@ def test_the_documented_robot_loop_runs_on_onnxruntime_alone_and_arrives(exporte
     assert lines[-2] == "arrived"
     commands = [line for line in lines if line.startswith("t=")]
     assert 20 < len(commands) < 300  # it drove, and arrived before the loop ran out
+
+
+def test_onnxruntime_is_not_let_read_weights_from_the_working_directory(exported, tmp_path, monkeypatch):
+    """Behind the graph check: loaded from bytes, onnxruntime looked for a weight stored outside the
+    file in the working directory (a policy file could read any file there, of any size)."""
+    onnx = optional("onnx")
+    from onnx import TensorProto, helper, numpy_helper
+
+    from common.curriculum.onnx_policy import OnnxPolicy
+
+    _, source = exported["stage1_2d_ppo"]
+    model = onnx.load_from_string(source.read_bytes())
+    for node in model.graph.node:
+        node.output[:] = ["before" if name == "action" else name for name in node.output]
+    tensor = TensorProto(name="beside", data_type=TensorProto.UINT8, dims=[4], data_location=TensorProto.EXTERNAL)
+    for key, value in (("location", "secret.bin"), ("offset", "0"), ("length", "4")):
+        entry = tensor.external_data.add()
+        entry.key, entry.value = key, value
+    model.graph.initializer.append(tensor)
+    # action = before + 0 * max(the file's bytes): what onnxruntime loads the file for, unfolded.
+    model.graph.initializer.append(numpy_helper.from_array(np.zeros((), dtype=np.float32), "zero"))
+    model.graph.node.extend([helper.make_node("Cast", ["beside"], ["as_float"], to=TensorProto.FLOAT),
+                             helper.make_node("ReduceMax", ["as_float"], ["largest"], keepdims=0),
+                             helper.make_node("Mul", ["largest", "zero"], ["nothing"]),
+                             helper.make_node("Add", ["before", "nothing"], ["action"])])
+    path = tmp_path / "reads_beside.onnx"
+    path.write_bytes(model.SerializeToString())
+    (tmp_path / "secret.bin").write_bytes(b"abcd")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(OnnxPolicy, "_check_graph", lambda self, model: None)
+    with pytest.raises(ConfigError, match="not an ONNX model onnxruntime can run"):
+        OnnxPolicy(path)

@@ -656,7 +656,7 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--drift", metavar="PNG", help="also plot the true path against wheel odometry")
     render.set_defaults(handler=_render)
 
-    export = commands.add_parser("export", help="write a policy's actor as an ONNX file (run with onnxruntime alone)")
+    export = commands.add_parser("export", help="write a policy's actor as an ONNX file (run with onnxruntime, no torch)")
     export.add_argument("policy", metavar="POLICY.zip")
     export.add_argument("--onnx", required=True, metavar="OUT.onnx", help="the file to write")
     export.set_defaults(handler=_export)

@@ -56,7 +56,7 @@ class DeterministicActor(nn.Module):
 def export_onnx(policy_path: str | Path, out_path: str | Path) -> Path:
     """Write the policy zip's actor as an ONNX file (atomically); returns its path."""
     out_path = Path(out_path)
-    if out_path.suffix != ".onnx":
+    if out_path.suffix.lower() != ".onnx":  # as eval tells an ONNX file from a zip
         raise ConfigError(None, "--onnx", f"{str(out_path)!r}: expected a file name ending in .onnx")
     if out_path.is_dir():
         raise ConfigError(None, "--onnx", f"{str(out_path)!r} is a directory; allowed: the path of the .onnx file to write")

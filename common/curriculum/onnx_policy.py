@@ -12,18 +12,23 @@ An exported file holds the policy's actor as one graph:
   mapping, episode length, provenance), and ``nav_onnx``, what the export did (:data:`FORMAT`).
 
 Opening a file runs nothing in it (ONNX is a graph of standard operators, no code), reads at most
-:data:`MAX_ONNX_BYTES` and refuses in one line a file that is no ONNX model, lacks or garbles the
-metadata, or whose graph does not read and write the sizes its metadata promises.
+:data:`MAX_ONNX_BYTES` and nothing beside it, and refuses in one line a file that is no ONNX model,
+lacks or garbles the metadata, whose graph uses an operator the exporter does not write
+(:data:`OPERATORS`: some compute for as long, or build tensors as large, as a file says), keeps a
+tensor outside the file or a weight that is not finite, or does not read and write the sizes its
+metadata promises. Checking the graph needs the ``onnx`` package beside onnxruntime (both in the
+``onnx`` extra).
 """
 
 from __future__ import annotations
 
 import json
+import tempfile
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from common.curriculum.policy_file import Manifest
 from common.errors import ConfigError
@@ -39,6 +44,24 @@ INPUT, OUTPUT = "observation", "action"
 ACTION_SIZE = 2
 MAX_ONNX_BYTES = 64 * 1024 * 1024  # as a policy zip: a network of 16 M float32 parameters
 EXPECTED = "an ONNX policy written by `curriculum export`"
+OPERATORS = frozenset({"Gemm", "MatMul", "Add", "Sub", "Mul", "Div", "Clip", "Tanh", "Relu", "Elu", "LeakyRelu",
+                       "Gelu", "Sigmoid", "Identity"})
+"""The operators of an exported actor: torch's exporter writes Gemm and the activation (every
+``activation_fn`` a manifest may name: Tanh, Relu, Elu, LeakyRelu, Gelu, Sigmoid with Mul), Clip
+and Tanh for the action, Sub, Div and Clip for a folded normaliser; MatMul, Add and Identity as
+another exporter version may write them. None takes a subgraph or builds a tensor of a size it is given."""
+
+
+class ExportRecord(BaseModel):
+    """What the export did (the file's ``nav_onnx`` metadata)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    format: Literal[FORMAT]  # type: ignore[valid-type]
+    observation_size: Annotated[int, Field(strict=True, ge=1, le=100_000)]
+    normaliser_folded_in: Annotated[bool, Field(strict=True)]
+    input: Literal[INPUT]  # type: ignore[valid-type]
+    output: Literal[OUTPUT]  # type: ignore[valid-type]
 
 
 def observation_size(manifest: Manifest) -> int:
@@ -63,21 +86,31 @@ class OnnxPolicy:
 
     def __init__(self, path: str | Path, threads: int = 1) -> None:
         self.path = Path(path)
-        data = read_bytes(self.path, MAX_ONNX_BYTES, EXPECTED, too_large=f"larger than {size_text(MAX_ONNX_BYTES)}")
+        data = read_bytes(self.path, MAX_ONNX_BYTES, EXPECTED, too_large=f"expected {EXPECTED} of at most "
+                          f"{size_text(MAX_ONNX_BYTES)}")
         try:
+            import onnx
             import onnxruntime
         except ImportError:
-            raise ConfigError(self.path, None, "running an ONNX policy needs onnxruntime: "
+            raise ConfigError(self.path, None, "running an ONNX policy needs onnx and onnxruntime: "
                               "pip install 'nav-curriculum[onnx]'") from None
+        try:
+            model = onnx.load_model_from_string(data)
+        except Exception as exc:  # protobuf's DecodeError, onnx's own errors
+            raise ConfigError(self.path, None, f"not an ONNX model ({type(exc).__name__}); refused") from None
+        self._check_graph(model)
         options = onnxruntime.SessionOptions()
         options.intra_op_num_threads, options.inter_op_num_threads = threads, 1
         options.log_severity_level = 3  # its warnings are ours to phrase
-        try:
-            # From bytes: a graph naming external weight files has no directory to find them in.
-            self._session = onnxruntime.InferenceSession(data, options, providers=["CPUExecutionProvider"])
-        except Exception as exc:  # onnxruntime raises its own Fail, InvalidGraph, InvalidProtobuf...
-            raise ConfigError(self.path, None, f"not an ONNX model onnxruntime can run ({type(exc).__name__}); "
-                              "refused") from None
+        with tempfile.TemporaryDirectory() as nowhere:
+            # Loaded from bytes, onnxruntime looks for external weight files in the working
+            # directory; pointed at an empty one, it finds none (the graph check refuses them first).
+            options.add_session_config_entry("session.model_external_initializers_file_folder_path", nowhere)
+            try:
+                self._session = onnxruntime.InferenceSession(data, options, providers=["CPUExecutionProvider"])
+            except Exception as exc:  # onnxruntime raises its own Fail, InvalidGraph, InvalidProtobuf...
+                raise ConfigError(self.path, None, f"not an ONNX model onnxruntime can run ({type(exc).__name__}); "
+                                  "refused") from None
         metadata = self._session.get_modelmeta().custom_metadata_map
         self.raw_manifest = self._json(metadata, MANIFEST_KEY)
         try:
@@ -87,11 +120,38 @@ class OnnxPolicy:
 
             error = pydantic_error(None, exc, Manifest)
             raise ConfigError(self.path, f"{MANIFEST_KEY}: {error.field}", error.problem) from None
-        export = self._json(metadata, EXPORT_KEY)
-        if export.get("format") != FORMAT:
-            raise ConfigError(self.path, f"{EXPORT_KEY}: format", f"{export.get('format')!r}; allowed: {FORMAT}")
         self.size = observation_size(self.manifest)
+        export = self._json(metadata, EXPORT_KEY)
+        try:
+            record = ExportRecord.model_validate(export)
+        except ValidationError as exc:
+            from common.scenario import pydantic_error
+
+            error = pydantic_error(None, exc, ExportRecord)
+            raise ConfigError(self.path, f"{EXPORT_KEY}: {error.field}", error.problem) from None
         self._check_signature()
+        if record.observation_size != self.size:
+            raise ConfigError(self.path, f"{EXPORT_KEY}: observation_size", f"{record.observation_size}; the "
+                              f"{self.manifest.observation} layout holds {self.size} values")
+
+    def _check_graph(self, model: Any) -> None:
+        """Only :data:`OPERATORS`, every tensor inside the file and every weight finite."""
+        from onnx import TensorProto, numpy_helper
+
+        graph = model.graph
+        for node in graph.node:
+            if node.domain not in ("", "ai.onnx") or node.op_type not in OPERATORS:
+                raise ConfigError(self.path, "graph", f"operator {'.'.join(filter(None, (node.domain, node.op_type)))}; "
+                                  f"allowed: {', '.join(sorted(OPERATORS))} (what `curriculum export` writes)")
+        if graph.sparse_initializer or model.functions:
+            raise ConfigError(self.path, "graph", f"sparse weights or functions; not {EXPECTED}")
+        for tensor in graph.initializer:
+            if tensor.data_location == TensorProto.EXTERNAL or tensor.external_data:
+                raise ConfigError(self.path, f"graph weight {tensor.name!r}", "stored outside the file; allowed: "
+                                  "weights inside it (as `curriculum export` writes them)")
+            values = numpy_helper.to_array(tensor)
+            if values.dtype.kind == "f" and not np.isfinite(values).all():
+                raise ConfigError(self.path, f"graph weight {tensor.name!r}", "holds a value that is not finite; refused")
 
     def _json(self, metadata: dict[str, str], key: str) -> dict:
         if key not in metadata:
