@@ -163,6 +163,10 @@ def open_zip(file: bytes | BinaryIO, source: str | Path | None, field: str | Non
         end = None
     if not end:
         raise refuse(f"not a zip file; expected {expected}")
+    if end[zipfile._ECD_LOCATION] + zipfile.sizeEndCentDir + end[zipfile._ECD_COMMENT_SIZE] != handle.seek(0, io.SEEK_END):
+        # A zip ends with its end record; one found earlier is a member's own (a policy's weights
+        # are a zip inside the zip) in a file cut short.
+        raise refuse(f"a truncated or damaged zip (its end record is not at its end); expected {expected}")
     count, directory = end[zipfile._ECD_ENTRIES_TOTAL], end[zipfile._ECD_SIZE]
     if count > max_members or directory > max_directory:
         raise refuse(f"a zip of {count:,} members in a directory of {size_text(directory)}; allowed: at most "

@@ -210,6 +210,17 @@ def test_an_inconsistent_manifest_is_a_one_line_refusal(untrained_policy, tmp_pa
     assert not (tmp_path / "p.onnx").exists()
 
 
+@pytest.mark.parametrize("kept", [574_800, 50_000])
+def test_a_truncated_policy_is_named_truncated(tmp_path, capsys, kept):
+    """Cut short, a policy's last end record can be a member's own (its weights are a zip in the
+    zip): it was read as the policy's, and the file refused as a zip of 45 members or no policy."""
+    cut = tmp_path / "cut.zip"
+    cut.write_bytes((ROOT / "curricula" / "policies" / "stage1_2d_ppo.zip").read_bytes()[:kept])
+    assert main(["eval", "--policy", str(cut), "--episodes", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "cut.zip: a truncated or damaged zip (its end record is not at its end)" in err and err.count("\n") == 1, err
+
+
 def test_oversized_members_are_refused_before_they_are_read(untrained_policy, tmp_path, capsys):
     bomb = _rewrite(untrained_policy, tmp_path / "bomb.zip", {"nav_manifest.json": b" " * (2 * 2**20)})
     assert main(["eval", "--policy", str(bomb)]) == 2
