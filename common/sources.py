@@ -122,12 +122,17 @@ WorldArgument = Union[Scenario, str, Path, Sequence[Scenario], Mapping[str, floa
 """What an env takes as its ``world`` (:func:`scenario_source` says how each is read)."""
 
 
+def check_difficulty(difficulty: float) -> None:
+    """A generator's difficulty is a number from 0 to 1 (NaN fails too)."""
+    if not (is_real(difficulty) and 0.0 <= difficulty <= 1.0):
+        raise ConfigError(None, "difficulty", f"got {quote(difficulty)}; allowed: a number from 0 to 1")
+
+
 def _kind_source(kind: str, difficulty: float, template: Scenario | None,
                  family: RobotFamily | None = None) -> GeneratorSource:
     if kind not in KINDS:
         raise ConfigError(None, "world", f"unknown scenario kind {quote(kind)}; allowed: {', '.join(KINDS)}")
-    if not (is_real(difficulty) and 0.0 <= difficulty <= 1.0):  # NaN fails too; checked here as the warehouse's is replaced below
-        raise ConfigError(None, "difficulty", f"got {quote(difficulty)}; allowed: a number from 0 to 1")
+    check_difficulty(difficulty)  # here, as the warehouse's is replaced below
     # The warehouse is defined by its 31 obstacles: it is always drawn at full difficulty.
     return GeneratorSource(kind, 1.0 if kind == "warehouse" else difficulty, template, family)
 

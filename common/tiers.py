@@ -20,6 +20,7 @@ class WorldLike(Protocol):
     """What the env and the evaluator need of a tier's world."""
 
     scenario: Scenario
+    period: float  # simulated seconds a step covers
 
     def reset(self, seed: int | None = None) -> Readings: ...
 
@@ -33,6 +34,7 @@ _TEMPLATES = {"flatland": "common.scenario:Scenario", "physics3d": "physics3d.ro
               "irsim": "common.scenario:Scenario"}
 # What a tier refuses to build, checked without building it (flatland builds every valid scenario).
 _REFUSALS = {"physics3d": "physics3d.world:refuse_unmodelled"}
+_LIMITS = {"physics3d": "physics3d.world:refuse_untrackable"}  # of the robot as conditioned
 TIERS = ("flatland", "physics3d")  # the tiers this project trains in
 # Where agents are evaluated: the tiers, and IR-SIM itself (an optional extra), run with the same
 # scenarios and metrics to tell navigation learnt from flatland learnt.
@@ -86,7 +88,10 @@ def _refuse_unbuilt_kinds(tier: str, kinds: list[str], difficulty: float) -> Non
     if tier not in _REFUSALS:
         return
     from common.generators import KINDS
+    from common.sources import check_difficulty
 
+    if any(kind in KINDS for kind in kinds):
+        check_difficulty(difficulty)  # before a kind is drawn at it: its error is not the tier's
     for kind in kinds:
         if kind in KINDS and (error := _kind_refusal(tier, kind, difficulty)) is not None:
             built = [other for other in KINDS if _kind_refusal(tier, other, difficulty) is None]
@@ -123,7 +128,14 @@ def refuse_unbuildable(world: str, scenario: Scenario, conditioned: Scenario) ->
 
     if world in TIERS:
         refuse_as_written(world, scenario)
+        _refuse_beyond_limits(world, conditioned)
         refuse_unmodelled(conditioned)
+
+
+def _refuse_beyond_limits(tier: str, conditioned: Scenario) -> None:
+    """A one-line error for robot limits the tier's body cannot follow (the URDF robot's in 3D)."""
+    if tier in _LIMITS:
+        _load(tier, _LIMITS)(conditioned.robot)
 
 
 def as_built(tier: str, scenario: Scenario, conditions: Conditions) -> Scenario:
@@ -132,5 +144,6 @@ def as_built(tier: str, scenario: Scenario, conditions: Conditions) -> Scenario:
     from common.motion.movers import refuse_unmodelled
 
     conditioned = conditions.for_tier(tier).scenario(scenario)
+    _refuse_beyond_limits(tier, conditioned)
     refuse_unmodelled(conditioned)
     return conditioned

@@ -458,3 +458,16 @@ def test_a_scenario_written_in_python_with_its_goal_outside_the_world_is_refused
     # A generator's scenarios are left to their own acceptance rule (every suite stays as it was).
     generated = next(iter(get_suite("sparse").scenarios(count=1, seed=0)))
     gym.make(env_id, world=generated.model_copy(update={"goal": (12.0, 5.0)})).close()
+
+
+@pytest.mark.parametrize("env_id", ["flatland/Nav-v0", "physics3d/WarehouseNav-v0"])
+def test_a_difficulty_out_of_range_is_named_alike_in_both_tiers(env_id):
+    """The 3D tier reported it as a kind it does not build, with nothing allowed."""
+    import gymnasium as gym
+
+    import flatland  # noqa: F401
+    import physics3d  # noqa: F401
+
+    for world in ("warehouse", {"sparse": 1, "cluttered": 1}):
+        with pytest.raises(ConfigError, match=r"^difficulty: got 3; allowed: a number from 0 to 1$"):
+            gym.make(env_id, world=world, difficulty=3)
