@@ -66,7 +66,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from common.errors import ConfigError
-from common.robots import RobotFamily, robot_profile
+from common.robots import PROFILES, RobotFamily, robot_profile
 from common.scenario import RobotProfile, Scenario
 
 Range = tuple[Annotated[float, Field(gt=0.0, le=10.0)], Annotated[float, Field(gt=0.0, le=10.0)]]
@@ -86,6 +86,7 @@ TIER_DEFAULTS: dict[str, dict[str, Any]] = {
     "irsim": {},
 }
 _NOT_IN = {"flatland": ONLY_3D, "physics3d": ONLY_2D, "irsim": NOT_IN_IRSIM}
+_NAMED = {"shape", "radius", "length", "width", "v_max", "w_max"}  # a profile's footprint and limits
 
 
 class EpisodeDraw(NamedTuple):
@@ -135,8 +136,11 @@ class Conditions(BaseModel):
     @field_validator("robot", mode="before")
     @classmethod
     def _profile_as_data(cls, value: Any) -> Any:
-        # A RobotProfile from Python, kept as the mapping a file would give (a manifest stores it).
-        return value.model_dump(mode="json", exclude_defaults=True) if isinstance(value, RobotProfile) else value
+        # A RobotProfile from Python, kept as the mapping a file would give (a manifest stores it),
+        # its footprint and limits named even where defaults: a tier's robot fills only what it leaves out.
+        if not isinstance(value, RobotProfile):
+            return value
+        return {**value.model_dump(mode="json", include=_NAMED), **value.model_dump(mode="json", exclude_defaults=True)}
 
     @field_validator("robot")
     @classmethod
@@ -184,6 +188,11 @@ class Conditions(BaseModel):
             refuse_other_knobs(given, tier)
         for knob in _NOT_IN[tier]:
             given.pop(knob, None)
+        base = TIER_DEFAULTS[tier].get("robot")
+        if isinstance(base, str) and isinstance(given.get("robot"), dict):
+            # A mapping changes the tier's robot (in 3D the URDF robot: ``{v_max: 0.3}`` is that box,
+            # slower), not the 2D default's circle, which no 3D body is.
+            given["robot"] = {**PROFILES[base].model_dump(mode="json", exclude_defaults=True), **given["robot"]}
         return Conditions.model_validate({**TIER_DEFAULTS[tier], **given})
 
     def given(self) -> dict[str, Any]:

@@ -112,6 +112,8 @@ class NavigationEnv(gym.Env):
                 raise
             raise error.with_source(file.path) from None
         self.scenario = scenario = self.world.scenario
+        # Frames a recorder writes per second: one per step (3D: control_period may change the step).
+        self.metadata = {**type(self).metadata, "render_fps": round(1.0 / self.world.period, 3)}
         if previous is None or scenario.robot != previous.robot or scenario.lidar != previous.lidar:
             if previous is not None and scenario.robot.kinematics != previous.robot.kinematics:
                 raise ValueError(f"scenario {scenario.name!r}: a {scenario.robot.kinematics} robot after a "

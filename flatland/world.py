@@ -119,9 +119,9 @@ class World:
         self._halts = scenario.world.collision_mode != "unobstructed"
         self._kept_movers: dict[int, tuple[Scenario, Movers]] = {}
         self._use_movers(scenario)
-        self._dt = scenario.world.step_time
+        self.period = scenario.world.step_time  # s: one step
         self._limits = (robot.v_min, robot.v_max, robot.w_low, robot.w_max)
-        self._accel = (robot.accel_v * self._dt, robot.accel_w * self._dt)
+        self._accel = (robot.accel_v * self.period, robot.accel_w * self.period)
         self._has_accel = math.isfinite(robot.accel_v) or math.isfinite(robot.accel_w)
         self.pose = scenario.start_pose
         self.velocity = (0.0, 0.0)
@@ -320,7 +320,7 @@ class World:
                 raise nan_command(command)
             v, w = self._clip(v, w)
             if not self.actuator.idle:
-                v, w = self.actuator(v, w, self._dt)
+                v, w = self.actuator(v, w, self.period)
             if self._compiled:
                 among = movers if movers is not None and movers.compiled else None
                 if (free := self._free_step(v, w, movers is None or among is not None, among)) is not None:
@@ -332,14 +332,14 @@ class World:
         if self.drive is not None:
             # The command, integrated as the robot would have moved without motion noise.
             odometry = self.odometry
-            odometry.pose, odometry.v, odometry.w = body_euler(odometry.pose, v, lateral, w, self._dt), v, w
+            odometry.pose, odometry.v, odometry.w = body_euler(odometry.pose, v, lateral, w, self.period), v, w
         elif ranges is None:
             left, right = wheel_speeds(v, w, self.odometry.wheel_radius, self.odometry.wheel_base)
-            self.odometry.update(left, right, self._dt)
+            self.odometry.update(left, right, self.period)
         previous_v = self.velocity[0]
         self.velocity = (v, w)
         self.steps += 1
-        acceleration = (v - previous_v) / self._dt
+        acceleration = (v - previous_v) / self.period
         if movers is None:
             self.stopped = self._touching_static and self._halts
             self.readings = self._read(acceleration, self.lidar.scan(*self.pose) if ranges is None else ranges)
@@ -418,13 +418,13 @@ class World:
             def at(seconds: float) -> Pose2D:
                 return body_euler(start, v, lateral, w, seconds)
             speed = math.hypot(v, lateral)
-        end = at(self._dt)
+        end = at(self.period)
         if not self._halts:
             return end, self.overlaps(end)
         # Nothing within the swept capsule, nothing touched: decided without pymunk's Python layer,
         # which costs more than the rest of a move.
         lidar = self.lidar
-        capsule = swept_capsule(self._sweep_radius, speed, w, self._dt)
+        capsule = swept_capsule(self._sweep_radius, speed, w, self.period)
         if test_clear and path_clear(start[0], start[1], end[0], end[1], capsule, lidar.circles, self._clear_boxes,
                                      lidar.segments, self._solids):
             return end, False
@@ -432,7 +432,7 @@ class World:
         # follows: chipmunk walks its tree with the bare segment and misses shapes that only the
         # radius reaches; the bounding-box query rarely comes back empty now, for a path near a
         # polygon's bounds or within the margin.)
-        reach = speed * self._dt + self._sweep_radius
+        reach = speed * self.period + self._sweep_radius
         box = pymunk.BB(start[0] - reach, start[1] - reach, start[0] + reach, start[1] + reach)
         candidates = self.space.bb_query(box, self._not_robot)
         if not candidates:
@@ -449,17 +449,17 @@ class World:
                        candidates: list[pymunk.Shape]) -> tuple[Pose2D, set[pymunk.Shape]] | None:
         """The earliest touching pose on the way from ``start`` to ``end`` (``at(t)``: the pose
         ``t`` seconds in, at ``speed``, turning at ``w``), and what it touches."""
-        turn = abs(w) * self._dt
+        turn = abs(w) * self.period
         circle = self._swept_circle
         if circle:
             # The swept circle is the footprint: exact along a straight move, chords along an arc.
             count = max(1, math.ceil(turn / _ARC_STEP)) if turn > 0 and self._curved else 1
         else:
             # A footprint's farthest point travels the translation plus its arc about the reference point.
-            count = max(1, math.ceil((speed * self._dt + turn * self._sweep_radius) / SWEEP_STEP))
+            count = max(1, math.ceil((speed * self.period + turn * self._sweep_radius) / SWEEP_STEP))
         previous = start
         for k in range(1, count + 1):
-            pose = end if k == count else at(self._dt * k / count)
+            pose = end if k == count else at(self.period * k / count)
             if circle:
                 hits = [(hit.alpha, shape) for shape in candidates
                         if (hit := shape.segment_query(previous[:2], pose[:2], self._sweep_radius))]
@@ -482,4 +482,4 @@ class World:
             (self.movers.states(), contact is not None)
         # Every field, in order: pose, velocity, odometry, lidar, imu, collided, time, camera, movers, contact.
         return record(Readings, (self.pose, self.velocity, estimate, frozen(ranges), imu, collided,
-                                 self.steps * self._dt, None, movers, contact))
+                                 self.steps * self.period, None, movers, contact))

@@ -8,6 +8,8 @@ robot and anything but the floor. ``reset``/``step`` return the same :class:`Rea
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
 import math
 import os
 import sys
@@ -20,7 +22,7 @@ from common.errors import ConfigError, quote
 from common.kinematics import Pose2D, WheelOdometry, nan_command, unicycle_exact, wrap_angle
 from common.motion.movers import mover_generator
 from common.readings import Contact, Odometry, Readings, frozen, mover_fault
-from common.scenario import Scenario
+from common.scenario import RobotProfile, Scenario
 from physics3d.robot import ROBOT_COLLISION_GROUP, WHEEL_BASE, WHEEL_RADIUS, Robot, yaw_of
 from physics3d.sensors import GRAVITY, Camera, Imu, Lidar, Quaternion, Vector
 from physics3d.movers import MovingBodies
@@ -72,6 +74,45 @@ def refuse_unmodelled(scenario: Scenario) -> None:
                           "allowed: stop, unobstructed_obstacles")
 
 
+def refuse_without_display() -> None:
+    """A RuntimeError unless the X display PyBullet's GUI would open answers: without DISPLAY the
+    GUI waits forever, and with one that does not answer (a stale DISPLAY over ssh) it ends the
+    whole process with exit code 1, no exception to catch."""
+    name = os.environ.get("DISPLAY")
+    if not name:
+        raise RuntimeError("the PyBullet GUI needs an X display (DISPLAY is not set); try xvfb-run")
+    library = ctypes.util.find_library("X11")
+    x11 = ctypes.CDLL(library) if library else None
+    if x11 is None:
+        raise RuntimeError("the PyBullet GUI needs the X11 library (libX11), which is not installed")
+    x11.XOpenDisplay.restype, x11.XOpenDisplay.argtypes = ctypes.c_void_p, [ctypes.c_char_p]
+    x11.XCloseDisplay.argtypes = [ctypes.c_void_p]
+    display = x11.XOpenDisplay(name.encode())
+    if not display:
+        raise RuntimeError(f"the PyBullet GUI cannot open the X display {name!r} (DISPLAY); try xvfb-run")
+    x11.XCloseDisplay(display)
+
+
+MAX_SPEED = 2.0  # m/s
+MAX_TURN_ACCELERATION = 4.0  # m/s²: v_max * w_max
+"""What the URDF robot's wheels hold on the warehouse floor, with a margin. Measured (2026-11-29,
+20 steps to settle, then the mean of 10; friction, mass and motor gain at 1): it drives 2.5 m/s
+straight and spins out at 3 (0.2 m/s, -8.9 rad/s); it turns 2 m/s at 2 rad/s (4 m/s²) and 1.5 m/s
+at 3 rad/s, and spins out at 2 m/s and 2.5 rad/s (5 m/s²) or 1 m/s and 6 rad/s."""
+
+
+def refuse_untrackable(robot: RobotProfile) -> None:
+    """A one-line error for limits the URDF robot cannot follow: past them it slips and spins, and
+    a policy's commands would mean nothing."""
+    if robot.v_max > MAX_SPEED:
+        raise ConfigError(None, "robot.v_max", f"{robot.v_max:g} m/s; allowed in the 3D tier: at most {MAX_SPEED:g} "
+                          "(the URDF robot's wheels slip and it spins at 3)")
+    if robot.v_max * robot.w_max > MAX_TURN_ACCELERATION:
+        raise ConfigError(None, "robot.w_max", f"{robot.w_max:g} rad/s at v_max {robot.v_max:g} m/s; allowed in the 3D "
+                          f"tier: v_max x w_max at most {MAX_TURN_ACCELERATION:g} m/s² (past it the robot spins out "
+                          "in a full-speed turn)")
+
+
 class World:
     """A 3D world built from a :class:`Scenario`.
 
@@ -94,9 +135,8 @@ class World:
     def __init__(self, scenario: Scenario, seed: int | None = None, conditions: Conditions | None = None,
                  gui: bool = False, camera: bool = False) -> None:
         refuse_unmodelled(scenario)
-        if gui and sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
-            # PyBullet's GUI waits forever for a window it cannot open; fail instead.
-            raise RuntimeError("the PyBullet GUI needs an X display (DISPLAY is not set); try xvfb-run")
+        if gui and sys.platform.startswith("linux"):
+            refuse_without_display()
         self.client = p.connect(p.GUI if gui else p.DIRECT)
         self.gui = gui
         self.conditions = resolved = (conditions or Conditions()).for_tier("physics3d")
@@ -117,6 +157,7 @@ class World:
         refuse_unmodelled(scenario)
         c = self.client
         scenario = self.conditions.scenario(scenario)
+        refuse_untrackable(scenario.robot)
         if self.gui:
             p.configureDebugVisualizer(p.COV_ENABLE_RENDERING, 0, physicsClientId=c)  # no redraw per body
         if self._state is not None:
@@ -150,6 +191,7 @@ class World:
 
     def reset(self, seed: int | None = None) -> Readings:
         """Put the robot back at the start, at rest; reseed the noise if ``seed`` is given."""
+        self._refuse_if_closed("reset")
         if seed is not None:
             self.rng = np.random.default_rng(seed)
             self.lidar.rng = self.imu.rng = self.odometry.rng = self.rng
@@ -175,6 +217,7 @@ class World:
 
     def step(self, v: float, w: float) -> Readings:
         """Drive with (v m/s, w rad/s), clipped to the robot's limits, for one control period."""
+        self._refuse_if_closed("step")
         v, w = float(v), float(w)
         if v != v or w != w:
             raise nan_command((v, w))
@@ -317,6 +360,11 @@ class World:
     def __reduce__(self):
         raise TypeError("a physics3d World is a PyBullet client, which cannot be pickled; pass the scenario "
                         "and build the World where it is used")
+
+    def _refuse_if_closed(self, call: str) -> None:
+        # A closed world's client is gone: PyBullet's own errors name neither the world nor the cause.
+        if self.client is None:
+            raise RuntimeError(f"{call}() on a closed physics3d World; make a new one")
 
     def close(self) -> None:
         """Disconnect the physics client (the GUI window closes)."""

@@ -6,10 +6,12 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import shutil
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -30,7 +32,8 @@ from common.generators import generate
 from common.kinematics import wrap_angle
 from tests.conftest import missing
 from tests.rollouts import rollout, same
-from common.scenario import BoxObstacle, CircleObstacle, LidarSpec, PolygonObstacle, Scenario, SegmentObstacle
+from common.scenario import (BoxObstacle, CircleObstacle, LidarSpec, PolygonObstacle, RobotProfile, Scenario,
+                             SegmentObstacle)
 from common.tiers import make_world
 from flatland.world import World as FlatWorld
 from physics3d.robot import (ROBOT_COLLISION_GROUP, ROBOT_PROFILE, TEMPLATE, URDF_PATH, WHEEL_BASE, WHEEL_RADIUS,
@@ -563,6 +566,68 @@ def test_gui_refuses_to_open_without_a_display(monkeypatch):
         pytest.skip("the display check is Linux's")
     with pytest.raises(RuntimeError, match="DISPLAY"):
         World(OPEN, gui=True)
+
+
+def test_gui_refuses_a_display_that_does_not_answer():
+    """A stale DISPLAY (over ssh): PyBullet's GUI ended the whole process with exit code 1."""
+    if not sys.platform.startswith("linux"):
+        pytest.skip("the display check is Linux's")
+    script = ("from physics3d.world import World\nfrom common.scenario import Scenario\n"
+              "try:\n    World(Scenario(), gui=True)\nexcept RuntimeError as error:\n    print(error)")
+    result = subprocess.run([sys.executable, "-c", script], env={**os.environ, "DISPLAY": ":987"},
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr[-1000:]
+    assert "cannot open the X display ':987' (DISPLAY); try xvfb-run" in result.stdout
+
+
+def test_a_closed_world_refuses_reset_and_step_in_one_line():
+    world = World(OPEN)
+    world.close()
+    for call in (world.reset, lambda: world.step(0.1, 0.0)):
+        with pytest.raises(RuntimeError, match=r"on a closed physics3d World; make a new one"):
+            call()
+
+
+def test_a_robot_mapping_changes_the_3d_robot_and_a_robot_profile_is_taken_whole():
+    """A mapping's unset fields came from the 2D default: {v_max: 0.3} made a 0.2 m circle turning
+    at 1 rad/s, which no 3D body is, while the URDF box drove."""
+    from common.robots import PROFILES
+
+    env = gym.make("physics3d/WarehouseNav-v0", robot={"v_max": 0.3})
+    # The 3D robot (the odometry_noise condition its encoders'), slower.
+    assert env.unwrapped.scenario.robot == PROFILES["physics3d"].model_copy(update={"v_max": 0.3, "encoder_noise": 0.01})
+    assert env.action_space.shape == (2,) and env.unwrapped.actions.w_max == 1.5
+    env.close()
+    whole = RobotProfile(radius=0.25)  # a profile from Python: every field as given, defaults too
+    env = gym.make("physics3d/WarehouseNav-v0", robot=whole)
+    assert env.unwrapped.scenario.robot == whole.model_copy(update={"encoder_noise": 0.01})
+    env.close()
+    import flatland  # noqa: F401  (registers its env)
+
+    env = gym.make("flatland/Nav-v0", robot={"v_max": 0.3})  # flatland's robot is the default one
+    assert env.unwrapped.scenario.robot == RobotProfile(v_max=0.3)
+
+
+@pytest.mark.parametrize("robot, expected", [
+    ({"v_max": 3.0}, "robot.v_max: 3 m/s; allowed in the 3D tier: at most 2"),
+    ({"v_max": 2.0, "w_max": 2.5}, "robot.w_max: 2.5 rad/s at v_max 2 m/s; allowed in the 3D tier: v_max x w_max at most 4"),
+])
+def test_limits_the_urdf_robot_cannot_follow_are_refused(robot, expected, capsys):
+    """At 3 m/s, or 2 m/s at 2.5 rad/s, its wheels slip and it spins (-9 rad/s) whatever it is told."""
+    with pytest.raises(ConfigError, match=re.escape(expected)):
+        gym.make("physics3d/WarehouseNav-v0", robot=robot)
+    assert main(["eval", "--world", "physics3d", "--policy", str(Path(__file__).parents[1] / "curricula" / "policies" / "stage1_2d_ppo.zip"),
+                 "--episodes", "1", "--env-kwargs", f"robot:{robot}"]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1 and expected in err, (out, err)  # refused before the announcement
+    gym.make("physics3d/WarehouseNav-v0", robot={"v_max": 2.0, "w_max": 2.0}).close()  # it follows these
+
+
+def test_render_fps_is_the_env_s_own_rate():
+    """A recorder wrote 10 frames a second whatever the control period."""
+    env = gym.make("physics3d/WarehouseNav-v0", control_period=0.05)
+    assert env.metadata["render_fps"] == 20.0 and type(env.unwrapped).metadata["render_fps"] == 10
+    env.close()
 
 
 _GUI_SMOKE = textwrap.dedent("""

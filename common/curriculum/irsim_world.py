@@ -50,6 +50,7 @@ class IrsimWorld:
             raise ConfigError(None, "--world", "irsim needs IR-SIM: pip install 'nav-curriculum[irsim]'")
         self.conditions = (conditions or Conditions()).for_tier("irsim")
         self.scenario = self.conditions.scenario(scenario)
+        self.period = self.scenario.world.step_time  # s: one step
         with tempfile.TemporaryDirectory() as folder, stdout_to_stderr():
             data = scenario_to_irsim(_with_map_image(self.scenario, Path(folder)))
             path = Path(folder) / "world.yaml"
