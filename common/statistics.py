@@ -16,19 +16,33 @@ from scipy import stats
 
 
 def aggregate(values: list[float], seed: int = 0, resamples: int = 2000) -> dict[str, Any]:
-    """Mean, interquartile mean (scipy's 25 %-trimmed mean) and its bootstrap 95 % interval."""
+    """Mean, interquartile mean (scipy's 25 %-trimmed mean, as rliable's) and its bootstrap 95 %
+    interval: None from one value (one seed says nothing of the spread). A value that is not finite
+    is left out and counted (``non_finite``): one NaN made every figure NaN, and NaN is no JSON."""
     data = np.asarray(values, dtype=float)
+    finite = np.isfinite(data)
+    data = data[finite]
     out: dict[str, Any] = {"n": int(data.size), "values": [float(v) for v in data]}
+    if not finite.all():
+        out["non_finite"] = int((~finite).sum())
     if data.size == 0:
         return {**out, "mean": None, "iqm": None, "ci95": None}
     iqm = float(stats.trim_mean(data, 0.25))
-    if data.size > 1 and np.ptp(data) > 0:
+    if data.size == 1:
+        ci = None
+    elif np.ptp(data) > 0:
         result = stats.bootstrap((data,), lambda x, axis: stats.trim_mean(x, 0.25, axis=axis), n_resamples=resamples,
                                  method="percentile", random_state=np.random.default_rng(seed))
         ci = [float(result.confidence_interval.low), float(result.confidence_interval.high)]
     else:
-        ci = [iqm, iqm]
+        ci = [iqm, iqm]  # every seed alike: no resample differs
     return {**out, "mean": float(data.mean()), "iqm": iqm, "ci95": ci}
+
+
+def interval_text(agg: dict[str, Any], separator: str = "–") -> str:
+    """An aggregate's interval as a report writes it: ``95% CI low–high``, or what one value lacks."""
+    ci = agg["ci95"]
+    return "no interval from one value" if ci is None else f"95% CI {ci[0]:.3f}{separator}{ci[1]:.3f}"
 
 
 def mcnemar(first: Sequence[bool], second: Sequence[bool]) -> tuple[int, int, float]:

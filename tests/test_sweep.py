@@ -36,7 +36,11 @@ def test_the_aggregate_is_the_interquartile_mean_with_a_bootstrap_interval():
     rng = np.random.default_rng(1)
     boot = [stats.trim_mean(rng.choice(values, len(values)), 0.25) for _ in range(4000)]
     assert abs(low - np.percentile(boot, 2.5)) < 0.03 and abs(high - np.percentile(boot, 97.5)) < 0.03
-    assert aggregate([0.9])["ci95"] == [0.9, 0.9] and aggregate([])["iqm"] is None
+    assert aggregate([])["iqm"] is None
+    # One seed says nothing of the spread: no interval (a zero-width one read as certainty).
+    assert aggregate([0.9])["ci95"] is None and aggregate([0.9, 0.9])["ci95"] == [0.9, 0.9]
+    # A NaN made every figure NaN (and sweep.json no JSON): left out and counted.
+    assert aggregate([0.9, float("nan"), 0.95]) == {**aggregate([0.9, 0.95]), "non_finite": 1}
 
 
 @pytest.mark.slow
@@ -253,7 +257,8 @@ def test_failed_trials_fail_the_sweep_which_names_them_and_still_reports_the_res
     # each in one line (the first of its error).
     assert printed.err.splitlines()[-2:] == [f"error: 1 of 2 trials failed (marked in {out / 'sweep.md'}):",
                                              f"  {failed}: RuntimeError: planted failure at the first evaluation"]
-    assert "over 1 trials" in printed.out  # the report is still written, over the trial that ran
+    # The report is still written, over the trial that ran (a search's: no spread over seeds).
+    assert "(no interval from one value), mean" in printed.out and "over 1 trial of different settings" in printed.out
     report = (out / "sweep.md").read_text()
     assert "**1 of 2 trials failed**" in report and f"- `{failed}`: RuntimeError: planted failure" in report
     assert report.count("| **failed** |") == 1
@@ -337,3 +342,38 @@ def test_a_seed_sweep_stopped_by_ctrl_c_says_so_and_how_to_go_on(tmp_path, capsy
     assert main(["sweep", str(TINY), "--seeds", "2", "--out", str(out)]) == 130
     assert capsys.readouterr().err == (f"interrupted: 2 of 2 trials unfinished (each run is whole to its last "
                                        f"checkpoint); continue with: curriculum sweep {TINY} --out {out} --resume\n")
+
+
+def test_a_trial_ray_never_started_counts_as_unfinished():
+    """Ctrl-C with more seeds than cores: Ray leaves a trial it never started without a config,
+    and the report crashed on it (a traceback, exit 1, no results)."""
+    from types import SimpleNamespace
+
+    from common.curriculum.sweep_report import _trial
+
+    waiting = _trial(SimpleNamespace(config=None, metrics=None, error=None))
+    assert waiting["status"] == "not started" and waiting["seed"] is None and waiting["final"] is None
+
+
+def test_options_that_do_not_apply_and_seeds_past_the_last_are_refused_before_ray(tmp_path, capsys, monkeypatch):
+    """--seeds with --space ran one seed while options.json recorded three; --trials and --metric
+    without one did nothing; a seed sweep past 2**31 - 1 failed every later trial three times in Ray."""
+    import ray
+
+    monkeypatch.setattr(ray, "init", lambda *args, **kwargs: pytest.fail("Ray started"))
+    space = tmp_path / "space.yaml"
+    space.write_text("stages.0.hyperparams.n_epochs: {choice: [3, 5]}\n")
+    late = tmp_path / "late.yaml"
+    late.write_text(TINY.read_text().replace("\nseed: 0\n", "\nseed: 2147483000\n"))
+    for argv, expected in (
+            (["--space", str(space), "--seeds", "3"], "error: --seeds: 3 with --space; allowed: a search (--space) runs"),
+            (["--trials", "4"], "error: --trials: 4 without --space; allowed: only with a search (--space)"),
+            (["--metric", "spl"], "error: --metric: 'spl' without --space; allowed: only with a search (--space)"),
+            (["--resume"], "nothing to resume here (no sweep ran); run without --resume")):
+        assert main(["sweep", str(TINY), "--out", str(tmp_path / "s"), *argv]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and expected in err, err
+    assert main(["sweep", str(late), "--seeds", "2", "--out", str(tmp_path / "s")]) == 2
+    assert capsys.readouterr().err == (f"error: {late}: seed: 2147483000: --seeds 2 runs seeds up to 2,147,484,000; "
+                                       "allowed: a seed of at most 2,147,482,647 for --seeds 2\n")
+    assert not (tmp_path / "s").exists()

@@ -101,6 +101,7 @@ def _run(args: argparse.Namespace) -> int:
 
 def _sweep(args: argparse.Namespace) -> int:
     from common.curriculum.sweep import run_sweep
+    from common.statistics import interval_text
 
     try:
         import ray  # noqa: F401
@@ -113,11 +114,13 @@ def _sweep(args: argparse.Namespace) -> int:
                         resume=args.resume, device=args.device)
     for name, agg in results["aggregate"].items():
         if agg["iqm"] is not None:
-            print(f"test {name}: IQM {agg['iqm']:.3f} (95% CI {agg['ci95'][0]:.3f}-{agg['ci95'][1]:.3f}), mean "
-                  f"{agg['mean']:.3f}, over {agg['n']} trials")
+            # A search's trials are different settings: their IQM is no spread over seeds.
+            n = agg["n"]
+            over = f"{n} trial{'s' * (n != 1)} of different settings" if args.space else f"{n} seed{'s' * (n != 1)}"
+            print(f"test {name}: IQM {agg['iqm']:.3f} ({interval_text(agg, '-')}), mean {agg['mean']:.3f}, over {over}")
     print(f"{len(results['trials'])} trials, {results['concurrent_trials']} at a time, {results['wall_seconds']:.0f} s; "
           f"results: {out / 'sweep.md'}")
-    unfinished = [t for t in results["trials"] if t["status"] == "stopped early"]
+    unfinished = [t for t in results["trials"] if t["status"] in ("stopped early", "not started")]
     if unfinished and not args.space:
         # A seed sweep stops no trial early: Ctrl-C did (Ray Tune ends the sweep on the first one and
         # says to resume with its own API), and the figures above are of unfinished runs.

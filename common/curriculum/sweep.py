@@ -49,6 +49,7 @@ from common.yaml_io import read_yaml, read_yaml_mapping
 
 DISTRIBUTIONS = ("uniform", "loguniform", "randint", "choice")
 SEED_STRIDE = 1000  # seeds of a seed sweep: curriculum seed + 1000·k, so no two runs share a stage seed
+MAX_SEED = 2**31 - 1  # a curriculum's (common.curriculum.schema)
 
 
 # -- search spaces -------------------------------------------------------------------------------
@@ -294,6 +295,19 @@ def sweep_options(out: Path, given: dict[str, Any], resume: bool, source: str | 
             "curriculum_sha256": digest}
 
 
+def _refuse_options_that_do_not_apply(seeds: int | None, space: str | Path | None, trials: int | None,
+                                      metric: str | None) -> None:
+    """A seed sweep has no trials to count or metric to maximise, and a search runs one seed: an
+    option given where it does not apply was recorded and silently ignored (a researcher asking a
+    search for three seeds got one)."""
+    if space is not None and seeds is not None and seeds != 1:
+        raise ConfigError(None, "--seeds", f"{seeds} with --space; allowed: a search (--space) runs the curriculum's "
+                          "seed, so leave --seeds out, or sweep seeds without --space")
+    for name, value in (("--trials", trials), ("--metric", metric)):
+        if space is None and value is not None:
+            raise ConfigError(None, name, f"{quote(value)} without --space; allowed: only with a search (--space)")
+
+
 def _check_out(out: Path) -> None:
     """Refuse, before anything is written, an ``out`` that is a file, or a directory that holds
     files and is not a sweep's (the results would be written among a user's files)."""
@@ -317,6 +331,9 @@ def run_sweep(source: str | Path, out: Path, seeds: int | None = None, space: st
 
     out = Path(out).resolve()
     _check_out(out)
+    _refuse_options_that_do_not_apply(seeds, space, trials, metric)
+    if resume and not out.exists():
+        raise ConfigError(out, None, "nothing to resume here (no sweep ran); run without --resume")
     given = {"seeds": seeds, "space": None if space is None else str(Path(space).resolve()), "trials": trials,
              "metric": metric}
     curriculum = read_yaml(source)
@@ -326,7 +343,10 @@ def run_sweep(source: str | Path, out: Path, seeds: int | None = None, space: st
         raise ConfigError(None, "--metric", f"{metric!r}; allowed: {', '.join(METRICS)}")
     if not (isinstance(cpus_per_trial, (int, float)) and 0 < cpus_per_trial <= 1024):  # refuses NaN too
         raise ConfigError(None, "--cpus-per-trial", f"got {cpus_per_trial!r}; allowed: a number above 0, at most 1024")
-    load_curriculum(source)  # one-line errors before any trial starts
+    config = load_curriculum(source)  # one-line errors before any trial starts
+    if space is None and (last := config.seed + SEED_STRIDE * (seeds - 1)) > MAX_SEED:
+        raise ConfigError(source, "seed", f"{config.seed}: --seeds {seeds} runs seeds up to {last:,}; allowed: a seed of "
+                          f"at most {MAX_SEED - SEED_STRIDE * (seeds - 1):,} for --seeds {seeds}")
     domains = None if space is None else load_space(space, read_yaml(source), source)
     if address:
         check_address(address)

@@ -16,13 +16,16 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from common.atomic import atomic_write
-from common.statistics import aggregate
+from common.statistics import aggregate, interval_text
 
 METRICS = ("success_rate", "spl")  # of the last stage's final test draw (and of each validation on the way)
 
 
 def _trial(result) -> dict[str, Any]:
     config, metrics = result.config, result.metrics or {}
+    if config is None:  # Ctrl-C before Ray started it (more trials than cores): no seed of its own yet
+        return {"name": "(not started)", "seed": None, "params": {}, "status": "not started", "final": None,
+                "run_dir": None, "node": None, "machine": None, "error": None}
     status = "done" if metrics.get("done") else ("error" if result.error else "stopped early")
     return {"name": trial_name(config, metrics.get("trial_id")), "seed": config["seed"],
             "params": config.get("params") or {}, "status": status, "final": metrics.get("final"),
@@ -79,7 +82,8 @@ def _curve(run_dir: str | None) -> list[tuple[int, float]]:
 def write_results(out: Path, grid, metric: str, address: str | None, concurrent: int, wall_seconds: float,
                   searched: bool, resumed: bool = False) -> dict[str, Any]:
     """sweep.json, sweep.md and sweep.png; ``wall_seconds`` is this invocation's (``resumed``: since the resume)."""
-    trials = sorted((_trial(result) for result in grid), key=lambda t: (t["seed"], json.dumps(t["params"], sort_keys=True)))
+    trials = sorted((_trial(result) for result in grid),
+                    key=lambda t: (t["seed"] is None, t["seed"] or 0, json.dumps(t["params"], sort_keys=True)))
     done = [t for t in trials if t["final"] is not None]
     results = {
         "backend": "ray", "address": address or "local", "metric": metric, "concurrent_trials": concurrent,
@@ -125,8 +129,8 @@ def _markdown(results: dict[str, Any]) -> str:
     for name, agg in results["aggregate"].items():
         if agg["iqm"] is None:
             continue
-        lo, hi = agg["ci95"]
-        lines.append(f"| test {name} | {agg['n']} | {agg['mean']:.3f} | {agg['iqm']:.3f} | {lo:.3f} – {hi:.3f} |")
+        interval = "– (one trial)" if agg["ci95"] is None else "{:.3f} – {:.3f}".format(*agg["ci95"])
+        lines.append(f"| test {name} | {agg['n']} | {agg['mean']:.3f} | {agg['iqm']:.3f} | {interval} |")
     lines += ["", "![sweep](sweep.png)", ""]
     return "\n".join(lines)
 
@@ -148,7 +152,7 @@ def _figure(trials: list[dict], results: dict[str, Any], path: Path, searched: b
     agg = results["aggregate"]["success_rate"]
     title = "validation success of the last stage"
     if agg["iqm"] is not None:
-        title += f"\ntest IQM {agg['iqm']:.3f} (95% CI {agg['ci95'][0]:.3f}–{agg['ci95'][1]:.3f}, n={agg['n']})"
+        title += f"\ntest IQM {agg['iqm']:.3f} ({interval_text(agg)}, n={agg['n']})"
     ax.set_title(title, fontsize=9)
     ax.set_xlabel("timesteps")
     ax.set_ylim(0, 1.02)
