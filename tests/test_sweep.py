@@ -377,3 +377,25 @@ def test_options_that_do_not_apply_and_seeds_past_the_last_are_refused_before_ra
     assert capsys.readouterr().err == (f"error: {late}: seed: 2147483000: --seeds 2 runs seeds up to 2,147,484,000; "
                                        "allowed: a seed of at most 2,147,482,647 for --seeds 2\n")
     assert not (tmp_path / "s").exists()
+
+
+def test_a_search_resumed_after_its_space_file_changed_is_refused(tmp_path, capsys, monkeypatch):
+    """Only the curriculum was compared: a space edited between runs went on unnoticed."""
+    import ray
+    import yaml
+
+    from common.curriculum.sweep import OPTIONS_FILE, curriculum_digest
+
+    monkeypatch.setattr(ray, "init", lambda *args, **kwargs: pytest.fail("Ray started"))
+    space = tmp_path / "space.yaml"
+    space.write_text("stages.0.hyperparams.n_epochs: {choice: [3, 5]}\n")
+    out = tmp_path / "search"
+    out.mkdir()
+    (out / OPTIONS_FILE).write_text(json.dumps({
+        "seeds": 1, "space": str(space), "trials": 2, "metric": "success_rate",
+        "curriculum_sha256": curriculum_digest(yaml.safe_load(TINY.read_text())),
+        "space_sha256": curriculum_digest(yaml.safe_load(space.read_text()))}))
+    space.write_text("stages.0.hyperparams.n_epochs: {choice: [3, 10]}\n")
+    assert main(["sweep", str(TINY), "--out", str(out), "--resume"]) == 2
+    assert capsys.readouterr().err == (f"error: {space}: changed since this sweep began; a resume continues it as it "
+                                       "began (restore the file, or start a new sweep with another --out)\n")

@@ -259,6 +259,7 @@ class SweepOptions(BaseModel):
     trials: Annotated[int, Field(ge=1, le=10_000)]
     metric: Literal[METRICS]  # type: ignore[valid-type]
     curriculum_sha256: Annotated[str, Field(pattern="^[0-9a-f]{64}$")] | None = None  # None: recorded before digests
+    space_sha256: Annotated[str, Field(pattern="^[0-9a-f]{64}$")] | None = None  # a search's space file, likewise
 
 
 def curriculum_digest(curriculum: dict) -> str:
@@ -348,6 +349,12 @@ def run_sweep(source: str | Path, out: Path, seeds: int | None = None, space: st
         raise ConfigError(source, "seed", f"{config.seed}: --seeds {seeds} runs seeds up to {last:,}; allowed: a seed of "
                           f"at most {MAX_SEED - SEED_STRIDE * (seeds - 1):,} for --seeds {seeds}")
     domains = None if space is None else load_space(space, read_yaml(source), source)
+    if space is not None:
+        digest = curriculum_digest(read_yaml(space))
+        if resume and options.get("space_sha256") not in (None, digest):
+            raise ConfigError(space, None, "changed since this sweep began; a resume continues it as it began "
+                              "(restore the file, or start a new sweep with another --out)")
+        options["space_sha256"] = digest
     if address:
         check_address(address)
     writable_place(out, "--out", directory=True)
