@@ -118,7 +118,7 @@ def gather_evidence(runner: EvidenceHost, state: dict) -> dict[str, Any]:
             per_seed[arm].append(row)
     evidence = _summary(per_seed, last.budget)
     report = out / "report.md"
-    text = report.read_text() + _report_section(evidence, per_seed, last.name)
+    text = (report.read_text() if report.exists() else "") + _report_section(evidence, per_seed, last.name)
     # Written as one set (a kill leaves the run's own report whole): a resume writes them again.
     atomic_write_all({out / "transfer.png": lambda tmp: _figure(per_seed, tmp, last.name),
                       report: lambda tmp: tmp.write_text(text)})
