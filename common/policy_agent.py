@@ -12,6 +12,7 @@ import numpy as np
 
 from common.actions import ActionMapping
 from common.drive import refuse_other_drives
+from common.errors import ConfigError
 from common.observations import ObservationLayout, make_layout
 from common.readings import Readings
 from common.route import Route
@@ -97,4 +98,8 @@ class PolicyAgent:
         observation = self.observe(readings, goal)
         action = self.predict(observation) if self.predict is not None else \
             self.model.predict(observation, deterministic=True)[0]
-        return self.mapping.to_velocity(action)
+        try:
+            return self.mapping.to_velocity(action)
+        except ValueError as error:  # a network that overflowed: the policy's fault, named, in one line
+            raise ConfigError(None, f"policy {self.name!r}", f"{error}; its network gave no usable action for an "
+                              "observation (damaged weights, or one far outside what it trained on)") from None

@@ -17,10 +17,11 @@ import torch
 from stable_baselines3 import PPO, SAC
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-import flatland  # noqa: F401
+import flatland
 from common.curriculum.policy import build_policy, load_policy, load_weights
 from common.curriculum.policy_file import NORMALIZER, Normalizer, PolicyFile, save_policy
 from common.errors import ConfigError
+from common.scenario import LidarSpec, RobotProfile, Scenario
 
 NAV7 = {"observation": "nav7", "goal_distance_scale": 10.0}
 # Statistics where sqrt(var + eps) and sqrt(var) + eps differ by far more than rounding: a zero
@@ -133,6 +134,21 @@ def test_a_policy_built_in_memory_says_why_it_cannot_cross_to_another_process():
     agent = PolicyAgent(object(), "nav7", 10.0, name="in_training")
     with pytest.raises(TypeError, match="the policy 'in_training' was not opened from a file"):
         pickle.dumps(agent)
+
+
+def test_a_policy_that_acts_nan_is_named_in_one_line():
+    """A network that overflowed mid-episode raised the action mapping's ValueError, a traceback
+    from `curriculum eval` that named no policy."""
+    from common.policy_agent import PolicyAgent
+
+    agent = PolicyAgent(object(), "nav7", 10.0, name="diverged", predict=lambda obs: np.array([np.nan, 0.0]))
+    agent.bind(RobotProfile(), LidarSpec())
+    agent.reset()
+    readings = flatland.World(Scenario()).reset()
+    with pytest.raises(ConfigError) as error:
+        agent.act(readings, (8.0, 8.0))
+    assert str(error.value).startswith("policy 'diverged': action array([nan, 0.]): expected finite numbers")
+    assert "\n" not in str(error.value)
 
 
 def _with_normalizer(change: Callable[[dict], None]) -> Callable[[Path, Path], Path]:
