@@ -30,7 +30,8 @@ from common.tiers import WorldLike, tier_source
 ENV_REGISTRATION = {"order_enforce": False, "disable_env_checker": True}
 """How both tiers register their env: ``gym.make`` adds no wrappers. The env refuses a step
 before reset (or after an episode ended) itself, and the tests check it with gymnasium's and
-stable-baselines3's env checkers; the two wrappers cost 2 µs of flatland's 17 µs step."""
+stable-baselines3's env checkers. The two wrappers cost 2.2 and 2.6 µs of flatland's 18.6-19.7 µs
+step on IR-SIM's circle world in two paired runs (a third was within the machine's noise)."""
 
 
 class NavigationEnv(gym.Env):

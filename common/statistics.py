@@ -39,10 +39,10 @@ def aggregate(values: list[float], seed: int = 0, resamples: int = 2000) -> dict
     return {**out, "mean": float(data.mean()), "iqm": iqm, "ci95": ci}
 
 
-def interval_text(agg: dict[str, Any], separator: str = "–") -> str:
+def interval_text(agg: dict[str, Any], separator: str = "–", label: str = "95% CI ") -> str:
     """An aggregate's interval as a report writes it: ``95% CI low–high``, or what one value lacks."""
     ci = agg["ci95"]
-    return "no interval from one value" if ci is None else f"95% CI {ci[0]:.3f}{separator}{ci[1]:.3f}"
+    return "no interval from one value" if ci is None else f"{label}{ci[0]:.3f}{separator}{ci[1]:.3f}"
 
 
 def mcnemar(first: Sequence[bool], second: Sequence[bool]) -> tuple[int, int, float]:

@@ -124,26 +124,25 @@ def refuse_unbuildable(world: str, scenario: Scenario, conditioned: Scenario) ->
     """The one-line error the named world (a tier, or ``irsim``) would raise when built from
     ``scenario`` (as written) made ``conditioned``, found without building it. IR-SIM says what it
     refuses only when it loads the file."""
-    from common.motion.movers import refuse_unmodelled
-
     if world in TIERS:
         refuse_as_written(world, scenario)
-        _refuse_beyond_limits(world, conditioned)
-        refuse_unmodelled(conditioned)
+        _refuse_as_conditioned(world, conditioned)
 
 
-def _refuse_beyond_limits(tier: str, conditioned: Scenario) -> None:
-    """A one-line error for robot limits the tier's body cannot follow (the URDF robot's in 3D)."""
+def _refuse_as_conditioned(tier: str, conditioned: Scenario) -> None:
+    """A one-line error for what a training tier cannot drive of a scenario under its conditions:
+    robot limits its body cannot follow (the URDF robot's in 3D), movers it cannot model."""
+    from common.motion.movers import refuse_unmodelled
+
     if tier in _LIMITS:
         _load(tier, _LIMITS)(conditioned.robot)
+    refuse_unmodelled(conditioned)
 
 
 def as_built(tier: str, scenario: Scenario, conditions: Conditions) -> Scenario:
     """``scenario`` (which :func:`refuse_as_written` let through) as a training tier's world drives
-    it under ``conditions``; or a one-line error for movers it cannot model under them."""
-    from common.motion.movers import refuse_unmodelled
-
+    it under ``conditions``; or a one-line error for what it cannot drive under them
+    (:func:`_refuse_as_conditioned`)."""
     conditioned = conditions.for_tier(tier).scenario(scenario)
-    _refuse_beyond_limits(tier, conditioned)
-    refuse_unmodelled(conditioned)
+    _refuse_as_conditioned(tier, conditioned)
     return conditioned

@@ -82,9 +82,9 @@ def refuse_without_display() -> None:
     if not name:
         raise RuntimeError("the PyBullet GUI needs an X display (DISPLAY is not set); try xvfb-run")
     library = ctypes.util.find_library("X11")
-    x11 = ctypes.CDLL(library) if library else None
-    if x11 is None:
+    if library is None:
         raise RuntimeError("the PyBullet GUI needs the X11 library (libX11), which is not installed")
+    x11 = ctypes.CDLL(library)
     x11.XOpenDisplay.restype, x11.XOpenDisplay.argtypes = ctypes.c_void_p, [ctypes.c_char_p]
     x11.XCloseDisplay.argtypes = [ctypes.c_void_p]
     display = x11.XOpenDisplay(name.encode())

@@ -236,3 +236,37 @@ def test_a_world_reloaded_many_times_holds_no_more_shapes():
     for _ in range(300):
         env.reset()
     assert len(env.unwrapped.world.space.static_body.shapes) < 100  # 1,000 and more when they leaked
+
+
+@pytest.mark.parametrize("world", ["cluttered", "crowd"])
+def test_the_records_a_step_builds_by_position_are_whole(world):
+    """The hot path builds its NamedTuples field by field in C (common.kinematics.record), which
+    checks no count: a field added to a record and not to its builder would read as missing only
+    where something asked for it."""
+    from common.readings import Imu, Odometry, Readings
+    from common.rewards import StepContext
+
+    env = make(world=world, observation="lidar43").unwrapped
+    contexts = []
+
+    class Seen:  # the env's reward, keeping each step's context
+        def __init__(self, reward) -> None:
+            self.reward = reward
+
+        def __call__(self, ctx):
+            contexts.append(ctx)
+            return self.reward(ctx)
+
+        def __getattr__(self, name):
+            return getattr(self.reward, name)
+
+    env.reward = Seen(env.reward)
+    env.reset(seed=0)
+    for _ in range(30):
+        *_, terminated, truncated, _ = env.step(np.array([0.6, 0.1], dtype=np.float32))
+        readings = env.readings
+        assert (len(readings), len(readings.odometry), len(readings.imu), len(readings.pose)) == (
+            len(Readings._fields), len(Odometry._fields), len(Imu._fields), 3)
+        if terminated or truncated:
+            env.reset()
+    assert contexts and all(len(ctx) == len(StepContext._fields) for ctx in contexts)

@@ -247,3 +247,20 @@ def test_ctrl_c_is_one_line_that_says_how_to_go_on(tmp_path, capsys, monkeypatch
     monkeypatch.setattr(Runner, "run", interrupted_once_prepared)
     assert main(["run", str(TINY), "--out", str(tmp_path / "run"), "--no-progress"]) == 130
     assert capsys.readouterr().err == "interrupted; every checkpoint written so far is whole: continue with --resume\n"
+
+
+def test_a_finished_stage_s_result_is_checked_field_by_field():
+    """A state.json stage result as a run writes it passes; true where a count belongs, a number
+    as text, NaN, or an interval of one end is refused (the report would misread it)."""
+    from common.curriculum.runner import _is_result
+
+    result = {"timesteps": 1024, "wall_seconds": 1.5, "steps_per_second": 680.0, "promoted": False,
+              "policy": "stages/0-open/policy.zip",
+              "final": {"success_rate": 0.5, "collision_rate": 0.5, "timeout_rate": 0, "stuck_rate": 0.0, "spl": 0.4,
+                        "episodes": 4, "success_ci95": [0.15, 0.85], "mean_steps": None, "draw": "test"}}
+    assert _is_result(result)
+    for damaged in ({**result, "timesteps": True}, {**result, "wall_seconds": "1.5"},
+                    {**result, "final": {**result["final"], "spl": float("nan")}},
+                    {**result, "final": {**result["final"], "success_ci95": [0.15]}},
+                    {key: value for key, value in result.items() if key != "policy"}):
+        assert not _is_result(damaged), damaged

@@ -113,22 +113,9 @@ class OnnxPolicy:
                                   "refused") from None
         metadata = self._session.get_modelmeta().custom_metadata_map
         self.raw_manifest = self._json(metadata, MANIFEST_KEY)
-        try:
-            self.manifest = Manifest.model_validate(self.raw_manifest)
-        except ValidationError as exc:
-            from common.scenario import pydantic_error
-
-            error = pydantic_error(None, exc, Manifest)
-            raise ConfigError(self.path, f"{MANIFEST_KEY}: {error.field}", error.problem) from None
+        self.manifest = self._validated(Manifest, self.raw_manifest, MANIFEST_KEY)
         self.size = observation_size(self.manifest)
-        export = self._json(metadata, EXPORT_KEY)
-        try:
-            record = ExportRecord.model_validate(export)
-        except ValidationError as exc:
-            from common.scenario import pydantic_error
-
-            error = pydantic_error(None, exc, ExportRecord)
-            raise ConfigError(self.path, f"{EXPORT_KEY}: {error.field}", error.problem) from None
+        record = self._validated(ExportRecord, self._json(metadata, EXPORT_KEY), EXPORT_KEY)
         self._check_signature()
         if record.observation_size != self.size:
             raise ConfigError(self.path, f"{EXPORT_KEY}: observation_size", f"{record.observation_size}; the "
@@ -152,6 +139,16 @@ class OnnxPolicy:
             values = numpy_helper.to_array(tensor)
             if values.dtype.kind == "f" and not np.isfinite(values).all():
                 raise ConfigError(self.path, f"graph weight {tensor.name!r}", "holds a value that is not finite; refused")
+
+    def _validated(self, model: type[BaseModel], data: dict, key: str) -> Any:
+        """``data`` (the metadata entry ``key``) as ``model``, or its first problem in one line."""
+        try:
+            return model.model_validate(data)
+        except ValidationError as exc:
+            from common.scenario import pydantic_error
+
+            error = pydantic_error(None, exc, model)
+            raise ConfigError(self.path, f"{key}: {error.field}", error.problem) from None
 
     def _json(self, metadata: dict[str, str], key: str) -> dict:
         if key not in metadata:

@@ -15,10 +15,11 @@ import platform
 import subprocess
 import time
 from pathlib import Path
-from typing import Callable
+from typing import Annotated, Callable
 
 import yaml
 from filelock import FileLock, Timeout
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 import common
 from common.atomic import atomic_write
@@ -87,20 +88,42 @@ def _is_state(state: object, config: CurriculumConfig) -> bool:
     return done == names[: len(done)] and all(_is_result(results.get(name)) for name in done) and set(results) <= set(names)
 
 
-_NUMBER = (int, float)
-# A finished stage's result, as the report and the closing lines read it.
-_RESULT_FIELDS = {"timesteps": int, "wall_seconds": _NUMBER, "steps_per_second": _NUMBER, "promoted": bool,
-                  "policy": str, "final": dict}
-_FINAL_FIELDS = {"success_rate": _NUMBER, "collision_rate": _NUMBER, "timeout_rate": _NUMBER, "stuck_rate": _NUMBER,
-                 "spl": _NUMBER, "episodes": int, "success_ci95": list, "mean_steps": (*_NUMBER, type(None))}
+class _Checked(BaseModel):
+    # Strict: JSON's true is no count, "3" no number; NaN is no figure. Other keys are kept as written.
+    model_config = ConfigDict(strict=True, extra="allow", allow_inf_nan=False)
+
+
+class _FinalFigures(_Checked):
+    """A stage's final evaluation, as the report and the closing lines read it."""
+
+    success_rate: float
+    collision_rate: float
+    timeout_rate: float
+    stuck_rate: float
+    spl: float
+    episodes: int
+    success_ci95: Annotated[list[float], Field(min_length=2, max_length=2)]
+    mean_steps: float | None
+
+
+class _StageResult(_Checked):
+    """A finished stage's result in state.json."""
+
+    timesteps: int
+    wall_seconds: float
+    steps_per_second: float
+    promoted: bool
+    policy: str
+    final: _FinalFigures
 
 
 def _is_result(result: object) -> bool:
     """Whether ``result`` is a finished stage's result as a run writes it."""
-    if not isinstance(result, dict) or not all(isinstance(result.get(k), t) for k, t in _RESULT_FIELDS.items()):
+    try:
+        _StageResult.model_validate(result)
+    except ValidationError:
         return False
-    final = result["final"]
-    return all(isinstance(final.get(k, ...), t) for k, t in _FINAL_FIELDS.items()) and len(final["success_ci95"]) == 2
+    return True
 
 
 def _purge_tensorboard_after(log_dir: Path, run_name: str, step: int) -> None:

@@ -129,7 +129,7 @@ def _markdown(results: dict[str, Any]) -> str:
     for name, agg in results["aggregate"].items():
         if agg["iqm"] is None:
             continue
-        interval = "– (one trial)" if agg["ci95"] is None else "{:.3f} – {:.3f}".format(*agg["ci95"])
+        interval = interval_text(agg, " – ", label="")  # the column says what it is
         lines.append(f"| test {name} | {agg['n']} | {agg['mean']:.3f} | {agg['iqm']:.3f} | {interval} |")
     lines += ["", "![sweep](sweep.png)", ""]
     return "\n".join(lines)
