@@ -125,6 +125,7 @@ class NavigationEnv(gym.Env):
             # Per beam, how far it runs inside the footprint, for a reward that reads the clearance.
             self._reach = footprint_reach(scenario.robot, scenario.lidar) if self.reward.reads("clearance") else None
         self._goal = scenario.goal
+        self._stride = scenario.robot.v_max * self.world.period
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
         """Start an episode; ``options={"resample": True}`` redraws a random world file's layout
@@ -183,7 +184,7 @@ class NavigationEnv(gym.Env):
             previous_route, self._route_distance = self._route_distance, self._route.distance(*readings.pose[:2])
             route_gain = previous_route - self._route_distance
         ctx = record(StepContext, (task.distance, previous, bearing, v, w, nearest_return(readings.lidar),
-                                   readings.collided, reached, clearance, route_gain))
+                                   readings.collided, reached, clearance, route_gain, self._stride))
         reward, shares = self.reward(ctx)
         # A crash is a termination, not a truncation: its value must not bootstrap from the next state.
         terminated = reached or outcome == "collision"

@@ -33,11 +33,17 @@ class StepContext(NamedTuple):
     reached: bool
     clearance: float = math.inf  # nearest return less how far its beam runs inside the footprint, m (see COSTLY_FIELDS)
     route_gain: float = 0.0  # metres of the route's cost-to-go gained this step (see COSTLY_FIELDS)
+    stride: float = 1.0  # m: the robot's step at full speed (v_max times the step's period)
 
 
-def progress(ctx: StepContext, positive_only: bool = False) -> float:
-    """Metres gained toward the goal this step (only gains, if ``positive_only``)."""
+def progress(ctx: StepContext, positive_only: bool = False, per_stride: bool = False) -> float:
+    """Metres gained toward the goal this step (only gains, if ``positive_only``); with
+    ``per_stride``, in the robot's full-speed steps instead: a robot four times slower then earns
+    as much per step as a fast one, and pays the per-step terms (time, clearance) at the same rate
+    for a metre gained, where metres would charge it four times as much per metre."""
     gained = ctx.prev_distance - ctx.distance
+    if per_stride:
+        gained /= ctx.stride
     return max(0.0, gained) if positive_only else gained
 
 

@@ -165,3 +165,24 @@ def test_the_clearance_term_prices_closeness_from_the_footprint():
 
     least = float((unwrapped._readings.lidar - footprint_reach(unwrapped.scenario.robot, unwrapped.scenario.lidar)).min())
     assert info["reward_terms"]["clearance"] == pytest.approx(-(10.0 - least))
+
+
+def test_progress_per_stride_pays_each_robot_by_its_own_full_speed_step():
+    from common.rewards import StepContext, progress
+
+    ctx = StepContext(distance=2.0, prev_distance=2.1, heading_error=0.0, v=0.5, w=0.0, min_range=1.0,
+                      collided=False, reached=False, stride=0.05)
+    assert progress(ctx, per_stride=True) == pytest.approx(2.0)
+    assert progress(ctx) == pytest.approx(0.1)  # metres, as before, unless asked
+    env = gym.make("flatland/Nav-v0", world="passages", observation="lidar49_robot", robot_family=True,
+                   reward={"progress": {"weight": 1.0, "per_stride": True}})
+    strides = set()
+    for seed in range(4):
+        _, info = env.reset(seed=seed)
+        before = info["distance"]
+        _, _, _, _, info = env.step(np.array([1.0, 0.0], dtype=np.float32))
+        unwrapped = env.unwrapped
+        stride = unwrapped.scenario.robot.v_max * unwrapped.world.period
+        strides.add(round(stride, 6))
+        assert info["reward_terms"]["progress"] == pytest.approx((before - info["distance"]) / stride)
+    assert len(strides) == 4  # each episode's own robot, not the first one's
