@@ -30,6 +30,10 @@ from common.irsim_package import import_irsim, quiet_stdout
 from common.params import is_real
 
 MAX_CELLS = 4096 * 4096  # an image this many pixels is refused before it is decoded
+MAX_SIDE = 8192  # pixels along either side: boxes are merged column by column, in Python
+# Boxes of occupied cells: each is a body in flatland's world (IR-SIM's own maps make at most
+# 14,236); a 1024 x 1024 checkerboard, 2 KB of PNG, would have made 524,288 and minutes of building.
+MAX_BOXES = 65_536
 # A generated grid's cells: IR-SIM's Perlin noise holds several float arrays of this size at once.
 MAX_GENERATED_CELLS = 2048 * 2048
 MAX_IMAGE_BYTES = 64 * 1024 * 1024
@@ -62,7 +66,7 @@ def _image_occupancy(path: str) -> np.ndarray:
     try:
         with Image.open(io.BytesIO(data)) as image:  # the header only: a huge image is refused undecoded
             width, height = image.size
-        too_large = width * height > MAX_CELLS
+        too_large = width * height > MAX_CELLS or max(width, height) > MAX_SIDE
         grid = None if too_large else mpimg.imread(io.BytesIO(data), format=Path(path).suffix.lstrip(".") or None)
     except (UnidentifiedImageError, Image.DecompressionBombError, OSError, ValueError) as exc:
         # PIL refuses a header of more pixels than its own cap before ours can (a bomb).
@@ -70,7 +74,8 @@ def _image_occupancy(path: str) -> np.ndarray:
         raise ConfigError(path, "world.obstacle_map", f"{why}; allowed: a PNG or another image of at most "
                           f"{MAX_CELLS:,} pixels") from None
     if too_large:
-        raise ConfigError(path, "world.obstacle_map", f"{width} x {height} pixels; allowed: at most {MAX_CELLS:,} pixels")
+        raise ConfigError(path, "world.obstacle_map", f"{width} x {height} pixels; allowed: at most {MAX_CELLS:,} pixels, "
+                          f"{MAX_SIDE:,} along either side")
     if grid.ndim > 2:
         grid = np.dot(grid[..., :3], [0.2989, 0.5870, 0.1140])
     if np.issubdtype(grid.dtype, np.integer):
@@ -196,6 +201,10 @@ def check_generator(spec: dict, width: float, height: float, field: str = "gener
     if cells > MAX_GENERATED_CELLS:
         raise ConfigError(None, f"{field}.resolution", f"{resolution:g} m makes {cells:,} cells over the "
                           f"{width:g} x {height:g} m world; allowed: at most {MAX_GENERATED_CELLS:,} cells")
+    octaves = spec.get("fractal", 1)  # Perlin noise is computed over every cell once per octave
+    if cells * octaves > MAX_GENERATED_CELLS:
+        raise ConfigError(None, f"{field}.fractal", f"{octaves} octaves over {cells:,} cells; allowed: at most "
+                          f"{MAX_GENERATED_CELLS:,} cells times octaves")
 
 
 def _generated_occupancy(spec: dict, width: float, height: float) -> np.ndarray:
@@ -244,6 +253,9 @@ def occupied_boxes(grid: GridMap, width: float, height: float, offset: tuple[flo
                           (i - first) * cell_x, (run[1] - run[0]) * cell_y))
         for run in runs:
             open_runs.setdefault(run, i)
+        if len(boxes) + len(open_runs) > MAX_BOXES:
+            raise ConfigError(None, "world.obstacle_map", f"more than {MAX_BOXES:,} boxes of occupied cells; allowed: at "
+                              f"most {MAX_BOXES:,} (a coarser map, or downsample)")
     table = np.array(boxes, dtype=float).reshape(-1, 4)
     table.setflags(write=False)
     return table
@@ -253,7 +265,12 @@ def resolve_image(name: str, folder: Path | None) -> str:
     """An image path as IR-SIM finds it: as given, beside the world file, or among the maps IR-SIM
     ships (``cave.png``, ``hm3d_1.png``, ...) when it is installed."""
     for candidate in (Path(name), *(() if folder is None else (folder / name,))):
-        if candidate.exists():  # a FIFO or a directory by that name is refused, not passed over
+        try:
+            found = candidate.exists()
+        except OSError as error:  # a name too long for the file system
+            raise ConfigError(None, "world.obstacle_map", f"image {quote(name)}: {error.strerror or error}; "
+                              "allowed: an image path") from None
+        if found:  # a FIFO or a directory by that name is refused, not passed over
             return str(regular_file(candidate, "an image file").resolve())
     irsim = import_irsim()
     if irsim is not None:

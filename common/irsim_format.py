@@ -43,7 +43,7 @@ from pydantic import ValidationError
 
 from common.drive import CHANNELS as DRIVE_CHANNELS, DEFAULT_NOISE
 from common.errors import ConfigError, did_you_mean, quote
-from common.grid_maps import GridMap, check_generator, occupancy, resolve_image
+from common.grid_maps import GridMap, check_generator, occupied_boxes, resolve_image
 from common.irsim_values import (
     Entry,
     Value,
@@ -230,7 +230,7 @@ def _grid_map(value: Any, path: str, source: str | Path | None, world: WorldSpec
     grid = _grid_source(value, path, source, world)
     if grid is not None:
         try:
-            occupancy(grid, world.width, world.height)
+            occupied_boxes(grid, world.width, world.height, world.offset)  # the map's cells, and its bodies bounded
         except ConfigError as exc:
             raise fail(join(path, "obstacle_map"), exc.problem) from None
     return grid

@@ -42,7 +42,7 @@ from common.fields import (  # noqa: F401  (re-exported: the scenario's caps and
     Point,
     Speed,
 )
-from common.grid_maps import GridMap, occupied_boxes, occupancy
+from common.grid_maps import GridMap, occupied_boxes
 from common.kinematics import Pose2D
 from common.motion.spec import Motion
 from common.polygons import is_simple_polygon
@@ -714,7 +714,7 @@ def scenario_from_mapping(data: dict, source: str | Path | None = None) -> Scena
             grid = grid.model_copy(update={"image": str(Path(source).resolve().parent / grid.image)})
             scenario = scenario.model_copy(update={"grid_map": grid})
         try:
-            occupancy(grid, scenario.world.width, scenario.world.height)
+            occupied_boxes(grid, scenario.world.width, scenario.world.height, scenario.world.offset)
         except ConfigError as exc:  # the image's own file named, where the error is about it
             if exc.source is None and exc.field and exc.field.startswith("generator."):
                 raise ConfigError(source, f"grid_map.{exc.field}", exc.problem) from None

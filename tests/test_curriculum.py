@@ -71,7 +71,13 @@ def _with(change: dict, stage: dict | None = None) -> dict:
      "stages.0.env_kwargs.camera", "got 'false'; allowed: true or false"),
     (_with({}, {"env_kwargs": {"lidar_noise": -1}}), "stages.0.env_kwargs.lidar_noise", "greater than or equal to 0"),
     (_with({}, {"scenarios": {"mix": {}}}), "stages.0.scenarios", "mix names no kind; allowed: a weight for one or more of open"),
-    (_with({}, {"scenarios": {"file": "/"}}), "stages.0.scenarios.file", "a directory, not a file: '/'; allowed: a scenario"),
+    (_with({}, {"scenarios": {"file": "/"}}), "stages.0.scenarios.file", "'/': a directory, not a regular file; expected a "
+     "file; allowed: a scenario"),
+    # A name too long for the file system raised from Path.is_file: 5 KB of it, naming no field.
+    (_with({}, {"scenarios": {"file": "a" * 5000}}), "stages.0.scenarios.file", "aaaa': cannot be read (file name too long)"),
+    (_with({}, {"init_from": "/nowhere.zip"}), "stages.0.init_from", "'/nowhere.zip': no such file; allowed: null, previous"),
+    (_with({"stages": [{"name": f"s{k}", "scenarios": {"kind": "sparse"}, "budget": 1, "eval": {"suite": "sparse"}}
+                       for k in range(65)]}), "stages", "List should have at most 64 items"),
     (_with({}, {"eval": {"suite": "sparse", "episodes": 10**9}}), "stages.0.eval.episodes", "less than or equal to 1000000"),
     (_with({}, {"budget": True}), "stages.0.budget", "Input should be a valid integer (got True)"),
     # A union's member tag (constrained-int) named no field and was printed as one.

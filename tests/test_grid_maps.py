@@ -158,6 +158,27 @@ def test_grid_maps_are_refused_in_one_line_where_they_cannot_be_read_or_built(tm
         World(scenario)
 
 
+def test_a_map_whose_cells_or_columns_would_take_minutes_is_refused_in_one_line(tmp_path):
+    """A 2 KB checkerboard PNG asked for 524,288 bodies (minutes, gigabytes); a 16,000,000 x 1
+    image for a Python step per column. Both refused as the file is read, naming it."""
+    from common.world_file import read_world_file
+
+    checker = (np.indices((600, 600)).sum(axis=0) % 2) * 255
+    path = _world_file(tmp_path, _image(tmp_path, checker, "checker.png"))
+    with pytest.raises(ConfigError) as error:
+        read_world_file(path)
+    assert str(error.value) == (f"{path}: world.obstacle_map: more than 65,536 boxes of occupied cells; allowed: at "
+                                "most 65,536 (a coarser map, or downsample)")
+    wide = _image(tmp_path, np.full((1, 9000), 255), "wide.png")
+    with pytest.raises(ConfigError, match=r"world\.obstacle_map: 9000 x 1 pixels; allowed: at most 16,777,216 pixels, "
+                                          r"8,192 along either side"):
+        read_world_file(_world_file(tmp_path, wide))
+    # IR-SIM's largest shipped map merges into 14,236 boxes; a map of wide stripes into few.
+    stripes = np.zeros((1000, 1000))
+    stripes[::2] = 255
+    assert len(occupied_boxes(GridMap(image=_image(tmp_path, stripes, "stripes.png")), 50.0, 50.0, (0.0, 0.0))) == 500
+
+
 PERLIN = {"name": "perlin", "resolution": 0.1, "complexity": 0.12, "fill": 0.32, "fractal": 1, "attenuation": 0.5, "seed": 48}
 
 
@@ -168,6 +189,8 @@ PERLIN = {"name": "perlin", "resolution": 0.1, "complexity": 0.12, "fill": 0.32,
     ({"resolution": -1}, "resolution", "got -1; allowed: a finite number above 0"),
     ({"fill": 5}, "fill", "got 5; allowed: a number from 0 to 1"),
     ({"fractal": 100000}, "fractal", "got 100000; allowed: a whole number from 1 to 16"),
+    # Noise is computed over every cell once per octave: 16 octaves of the largest grid ran for minutes.
+    ({"resolution": 0.01, "fractal": 2}, "fractal", "2 octaves over 4,000,000 cells; allowed: at most 4,194,304 cells times octaves"),
     ({"complexity": float("nan")}, "complexity", "got nan; allowed: a finite number above 0"),
     ({"complexity": "abc"}, "complexity", "got 'abc'; allowed: a finite number above 0"),
     ({"seed": -3}, "seed", "got -3; allowed: a whole number from 0, or null"),

@@ -42,6 +42,7 @@ from common.curriculum.hyperparams import OPTIMIZER_KERNELS, policy_kwargs_from_
 from common.curriculum.policy_file import ALGORITHMS
 from common.drive import refuse_other_drives
 from common.errors import ConfigError, did_you_mean, quote
+from common.files import regular_file
 from common.generators import KINDS, SUITES
 from common.observations import LAYOUTS
 from common.rewards import resolve_reward_spec
@@ -50,6 +51,7 @@ from common.task import MAX_EPISODES, MAX_STEPS, check_env_kwargs
 from common.tiers import TIERS
 from common.yaml_io import read_yaml_mapping
 
+MAX_STAGES = 64  # each is validated by building its worlds: 15,000 stages took minutes before a refusal
 MAX_BUDGET = 10**10  # a stage's env steps: days on a cluster; a typo's 10^29 is refused, not trained toward
 
 
@@ -162,7 +164,7 @@ class CurriculumConfig(_Strict):
     name: Name
     seed: Annotated[int, Field(ge=0, le=2**31 - 1)] = 0
     device: Literal["auto", "cpu", "cuda", "mps"] = "auto"
-    stages: Annotated[list[StageSpec], Field(min_length=1)]
+    stages: Annotated[list[StageSpec], Field(min_length=1, max_length=MAX_STAGES)]
     evidence: EvidenceSpec | None = None
 
     @model_validator(mode="after")
@@ -199,6 +201,15 @@ def _check_worlds(stage: StageSpec, conditions: Conditions, source: str | Path, 
             refuse_other_drives(as_built(stage.world, raw, conditions).robot, "a curriculum stage")
         except ConfigError as error:
             raise _world_error(stage, source, field, error, raw.name) from None
+
+
+def _require_file(path: str, source: str | Path, field: str, allowed: str) -> None:
+    """A one-line error naming ``field`` unless ``path`` is a regular file: a name too long for the
+    file system, a directory or a FIFO is refused as a missing file is."""
+    try:
+        regular_file(path)
+    except ConfigError as error:
+        raise ConfigError(source, field, f"{quote(path)}: {error.problem}; allowed: {allowed}") from None
 
 
 def _world_error(stage: StageSpec, source: str | Path, field: str, error: ConfigError, world: str | None = None,
@@ -239,14 +250,11 @@ def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
     conditions = check_env_kwargs(stage.env_kwargs, stage.world, source, f"{field}.env_kwargs")
     if stage.init_from == "previous" and index == 0:
         raise ConfigError(source, f"{field}.init_from", "the first stage has no previous stage; allowed: null or a policy path")
-    if stage.init_from not in (None, "previous") and not Path(stage.init_from).is_file():
-        raise ConfigError(source, f"{field}.init_from", f"no policy file {quote(stage.init_from)}; allowed: null, previous or a .zip path")
     if stage.init_from not in (None, "previous"):
+        _require_file(stage.init_from, source, f"{field}.init_from", "null, previous or a .zip path")
         _check_init_policy(stage, source, f"{field}.init_from")
-    if stage.scenarios.file is not None and not Path(stage.scenarios.file).is_file():
-        what = "a directory, not a file" if Path(stage.scenarios.file).is_dir() else "no such file"
-        raise ConfigError(source, f"{field}.scenarios.file", f"{what}: {quote(stage.scenarios.file)}; allowed: a scenario "
-                          "or IR-SIM world YAML file")
+    if stage.scenarios.file is not None:
+        _require_file(stage.scenarios.file, source, f"{field}.scenarios.file", "a scenario or IR-SIM world YAML file")
     _check_worlds(stage, conditions, source, field)
 
 
