@@ -749,7 +749,10 @@ def _object(entry: Entry, path: str, draws: _Draws, role: str) -> Any:
     try:
         return _obstacle(shape, state, unobstructed, item.path, motion)
     except ValidationError as exc:
-        raise fail(item.path, pydantic_error(None, exc).problem) from None
+        error = pydantic_error(None, exc)
+        # Where the obstacle stands comes from its state (or the distribution that drew it), its size from its shape.
+        placed = error.field in ("x", "y", "yaw")
+        raise fail(value_of(entry, "state", None, path).path if placed else item.path, error.problem) from None
 
 
 _DRIVE_KEYS = ("kinematics", "static", "velocity", "state")

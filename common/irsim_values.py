@@ -140,7 +140,9 @@ def build_model(model: type[BaseModel], path: str, fields: dict[str, Value]) -> 
         return model(**{name: item.value for name, item in fields.items()})
     except ValidationError as exc:
         error = pydantic_error(None, exc)
-        field = fields[error.field].path if error.field in fields else path
+        # pydantic names an element as "start.0": the IR-SIM key that gave "start", and the index.
+        head, _, rest = (error.field or "").partition(".")
+        field = path if head not in fields else join(fields[head].path, rest) if rest else fields[head].path
         raise fail(field, error.problem) from None
 
 
