@@ -38,9 +38,9 @@ class StepContext(NamedTuple):
 
 def progress(ctx: StepContext, positive_only: bool = False, per_stride: bool = False) -> float:
     """Metres gained toward the goal this step (only gains, if ``positive_only``); with
-    ``per_stride``, in the robot's full-speed steps instead: a robot four times slower then earns
-    as much per step as a fast one, and pays the per-step terms (time, clearance) at the same rate
-    for a metre gained, where metres would charge it four times as much per metre."""
+    ``per_stride``, in the robot's full-speed steps (``ctx.stride``) instead: a robot four times
+    slower then earns as much per step as a fast one, so the per-step terms (time, clearance)
+    weigh alike against its progress, where in metres they cost it four times as much per metre."""
     gained = ctx.prev_distance - ctx.distance
     if per_stride:
         gained /= ctx.stride
