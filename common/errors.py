@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any, Iterable
 
 QUOTE_CHARS = 80  # the most of a user's value an error message repeats
+SOURCE_CHARS = 240  # a file named longer than this is shown by its start and end, so the problem still shows
 MESSAGE_CHARS = 1000  # a safety net: no message, however built, floods a terminal (the longest allowed-keys list is ~300)
 
 _short = reprlib.Repr()  # Python 3.11's Repr takes no keyword arguments
@@ -34,6 +35,15 @@ def require_flag(name: str, value: Any, source: str | Path | None = None) -> Non
         raise ConfigError(source, name, f"got {quote(value)}; allowed: true or false")
 
 
+def _shortened(name: str) -> str:
+    """A file name cut in the middle to :data:`SOURCE_CHARS` characters (a 5,000-character path
+    filled the whole message before its problem could be read)."""
+    if len(name) <= SOURCE_CHARS:
+        return name
+    keep = (SOURCE_CHARS - 3) // 2
+    return f"{name[:keep]}...{name[-keep:]}"
+
+
 class ScenarioWarning(UserWarning):
     """A world file that runs, but probably not as its author meant (IR-SIM runs such files too)."""
 
@@ -45,7 +55,7 @@ class ConfigError(ValueError):
     """
 
     def __init__(self, source: str | Path | None, field: str | None, problem: str) -> None:
-        self.source = str(source) if source is not None else None
+        self.source = None if source is None else _shortened(str(source))
         self.field = field
         self.problem = problem
         parts = [p for p in (self.source, self.field) if p]

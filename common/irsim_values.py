@@ -140,10 +140,16 @@ def build_model(model: type[BaseModel], path: str, fields: dict[str, Value]) -> 
         return model(**{name: item.value for name, item in fields.items()})
     except ValidationError as exc:
         error = pydantic_error(None, exc)
-        # pydantic names an element as "start.0": the IR-SIM key that gave "start", and the index.
+        # pydantic names an element as "start.0": the IR-SIM key that gave "start", then the rest.
         head, _, rest = (error.field or "").partition(".")
-        field = path if head not in fields else join(fields[head].path, rest) if rest else fields[head].path
-        raise fail(field, error.problem) from None
+        raise fail(_within(fields[head].path, rest) if head in fields else path, error.problem) from None
+
+
+def _within(path: str, location: str) -> str:
+    """``path`` extended by a pydantic location ("0", "motion.1"), written as IR-SIM paths are: state[0]."""
+    for part in location.split(".") if location else ():
+        path = f"{path}[{part}]" if part.isdigit() else join(path, part)
+    return path
 
 
 def values_of(entry: Entry, keys: tuple[str, ...]) -> tuple:

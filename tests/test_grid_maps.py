@@ -77,6 +77,11 @@ def test_a_scenario_file_takes_a_map_image_beside_it(tmp_path):
     (tmp_path / "both.yaml").write_text("grid_map: {}\n")
     with pytest.raises(ConfigError, match=r"both\.yaml: grid_map: a grid map comes from an image or a generator"):
         load_scenario(tmp_path / "both.yaml")
+    # A name of 5,000 characters filled the message's 1,000 before its problem: cut in its middle, the problem shows.
+    (tmp_path / "long.yaml").write_text(f"grid_map: {{image: {'a' * 5000}.png}}\n")
+    with pytest.raises(ConfigError, match=r"long\.yaml: grid_map: \S*a\.\.\.a+\.png: cannot be read \(file name too "
+                                          r"long\); expected an image file$"):
+        load_scenario(tmp_path / "long.yaml")
 
 
 def _world_file(tmp_path, obstacle_map, **world) -> str:

@@ -449,10 +449,10 @@ ERRORS = [
     (ROBOT + "obstacle: {distribution: {name: random, spread: 1}}\n", "obstacle.distribution.spread", "unknown key"),
     (ROBOT + "obstacle: {unobstructed: maybe}\n", "obstacle.unobstructed", "expected true or false"),
     (ROBOT + "obstacle: {kinematics: {name: teleport}}\n", "obstacle.kinematics.name", "allowed: diff, omni"),
-    # An element out of range is named by its key and index, not its model's or its shape's.
-    (ROBOT + "  state: [20000, 1, 0]\n", "robot.state.0", "less than or equal to 10000 (got 20000.0)"),
-    (ROBOT + "  sensors: [{offset: [5000, 0, 0]}]\n", "robot.sensors[0].offset.0", "less than or equal to 1000"),
-    ("world: {offset: [20000, 0]}\n" + ROBOT, "world.offset.0", "less than or equal to 10000"),
+    # An element out of range is named by its key and index (as IR-SIM paths are written), not its model's or its shape's.
+    (ROBOT + "  state: [20000, 1, 0]\n", "robot.state[0]", "less than or equal to 10000 (got 20000.0)"),
+    (ROBOT + "  sensors: [{offset: [5000, 0, 0]}]\n", "robot.sensors[0].offset[0]", "less than or equal to 1000"),
+    ("world: {offset: [20000, 0]}\n" + ROBOT, "world.offset[0]", "less than or equal to 10000"),
     (ROBOT + "obstacle: [{shape: {name: circle, radius: 0.2}, state: [20000, 5, 0]}]\n", "obstacle[0].state",
      "less than or equal to 10000"),
     (ROBOT + "obstacle: {number: 2, distribution: {name: random, range_high: [50000, 50000, 0]}}\n",

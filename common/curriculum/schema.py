@@ -51,6 +51,7 @@ from common.task import MAX_EPISODES, MAX_STEPS, check_env_kwargs
 from common.tiers import TIERS
 from common.yaml_io import read_yaml_mapping
 
+MAX_SEED = 2**31 - 1  # a curriculum's seed, and so every seed a sweep derives from it
 MAX_STAGES = 64  # each is validated by building its worlds: 15,000 stages took minutes before a refusal
 MAX_BUDGET = 10**10  # a stage's env steps: days on a cluster; a typo's 10^29 is refused, not trained toward
 
@@ -162,7 +163,7 @@ class CurriculumConfig(_Strict):
     """A curriculum: stages run in order, each optionally continuing from the previous policy."""
 
     name: Name
-    seed: Annotated[int, Field(ge=0, le=2**31 - 1)] = 0
+    seed: Annotated[int, Field(ge=0, le=MAX_SEED)] = 0
     device: Literal["auto", "cpu", "cuda", "mps"] = "auto"
     stages: Annotated[list[StageSpec], Field(min_length=1, max_length=MAX_STAGES)]
     evidence: EvidenceSpec | None = None

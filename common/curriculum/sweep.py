@@ -49,7 +49,6 @@ from common.yaml_io import read_yaml, read_yaml_mapping
 
 DISTRIBUTIONS = ("uniform", "loguniform", "randint", "choice")
 SEED_STRIDE = 1000  # seeds of a seed sweep: curriculum seed + 1000·k, so no two runs share a stage seed
-MAX_SEED = 2**31 - 1  # a curriculum's (common.curriculum.schema)
 
 
 # -- search spaces -------------------------------------------------------------------------------
@@ -328,7 +327,7 @@ def run_sweep(source: str | Path, out: Path, seeds: int | None = None, space: st
     Every input is checked before Ray starts. Trials that fail are in the results (status ``error``,
     the first line of the error, and the names in ``failed``), for the caller to report and exit on.
     """
-    from common.curriculum.schema import load_curriculum
+    from common.curriculum.schema import MAX_SEED, load_curriculum
 
     out = Path(out).resolve()
     _check_out(out)
