@@ -294,7 +294,7 @@ class World:
         if self.movers is None:
             self.readings = self._read(0.0, self.lidar.scan(*self.pose))
             return self.readings
-        self.movers.reset(self.pose)
+        self.movers.reset(self.pose, self.mover_rng)
         self.readings = self._read(0.0, self.lidar.scan(*self.pose, *self.movers.visible()), None)
         return self.readings
 

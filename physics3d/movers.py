@@ -32,9 +32,10 @@ class MovingBodies:
         self.heights = [0.5 * scenario.obstacles[int(table.obstacle_index[m])].height for m in rows]
         self.row_of = {body: k for k, body in enumerate(self.bodies)}  # a body's row in the states
 
-    def reset(self, pose: tuple[float, float, float]) -> None:
-        """Every mover back at its start (the robot at ``pose``)."""
-        self.movers.reset(pose)
+    def reset(self, pose: tuple[float, float, float], rng: np.random.Generator) -> None:
+        """Every mover back at its start (the robot at ``pose``; a goalless wanderer's first goal
+        drawn from ``rng``)."""
+        self.movers.reset(pose, rng)
         self._place()
 
     def finish(self, pose: tuple[float, float, float], v: float, w: float, rng: np.random.Generator) -> None:

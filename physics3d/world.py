@@ -210,7 +210,7 @@ class World:
         self.odometry.reset(self.pose())
         self.imu.reset(drawn.gyro_bias)
         if self.movers is not None:
-            self.movers.reset(self.pose())
+            self.movers.reset(self.pose(), self.mover_rng)
             p.performCollisionDetection(physicsClientId=self.client)
         self.readings = self._read(0.0, self.touching(), (self.robot.link_pose(), self.robot.velocity()))
         return self.readings

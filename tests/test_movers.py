@@ -71,9 +71,11 @@ def test_a_patrol_visits_its_waypoints_in_order(route, visits):
         assert reached == visits
 
 
-def test_a_wanderer_draws_its_goals_from_the_episode_seed():
+@pytest.mark.parametrize("goals", [[(6.0, 5.0)], []], ids=["a-first-goal", "goals-drawn-from-the-start"])
+def test_a_wanderer_draws_its_goals_from_the_episode_seed(goals):
+    # Without goals its first is drawn at reset (before, its route was empty: every step crashed).
     region = (1.0, 1.0, 9.0, 9.0)
-    world = world_of(person(5.0, 5.0, [(6.0, 5.0)], wander=region, goal_threshold=0.2))
+    world = world_of(person(5.0, 5.0, goals, wander=region, goal_threshold=0.2))
 
     def drive(seed: int) -> np.ndarray:
         world.reset(seed=seed)
@@ -248,8 +250,8 @@ def test_a_reset_starts_the_same_episode_again_from_the_same_start_and_a_new_one
 
     def episode(movers: Movers, pose) -> np.ndarray:
         """What the first readings see (states, the lidar's circles and boxes), then the movers' poses each step."""
-        movers.reset(pose)
         rng = np.random.default_rng(0)  # the wanderers' next goals
+        movers.reset(pose, rng)
         seen = [movers.states().rows.ravel(), *(rows.copy().ravel() for rows in movers.visible())]
         for k in range(60):
             movers.finish((pose[0] + 0.02 * k, pose[1], pose[2]), 0.2, 0.0, False, rng)
@@ -293,7 +295,7 @@ def test_a_crowds_social_force_sums_every_pair_within_reach_in_the_batched_order
     from common.motion.table import OVX, OVY, OX, OY, ROW
 
     movers = Movers(generate("crowd", 0, 1.0, "eval", reacting=True, behavior="sfm"))
-    movers.reset((1.0, 1.0, 0.0))
+    movers.reset((1.0, 1.0, 0.0), np.random.default_rng(0))
     t = movers.table
     members = movers._members[0]
     states = [t.objects[t.I[m, ROW], [OX, OY, OVX, OVY]] for m in members]

@@ -62,6 +62,19 @@ def test_movers_blind_to_the_robot_move_in_3d_exactly_as_in_flatland(suite):
     assert np.hypot(*(ours[:, :2] - first[0][:, :2]).T).max() > 3.0  # they went somewhere
 
 
+def test_a_wanderer_without_goals_draws_its_first_alike_in_both_tiers():
+    # Its first goal is drawn at reset from the movers' stream, which both tiers seed alike.
+    wanderer = CircleObstacle(x=2.0, y=2.0, radius=0.25, height=1.7,
+                              motion=Motion(behavior=Dash(), wander=(1.0, 1.0, 4.0, 9.0), vel_max=(1.0, 1.0)))
+    scenario = world_of(wanderer).scenario
+    flat, solid = FlatWorld(scenario, seed=1, conditions=Conditions(robot="physics3d")), World(scenario, seed=1)
+    ours, theirs = flat.reset(seed=7).movers.rows, solid.reset(seed=7).movers.rows
+    for _ in range(100):
+        ours, theirs = flat.step(0.0, 0.0).movers.rows, solid.step(0.0, 0.0).movers.rows
+        assert np.array_equal(ours[:, :3], theirs[:, :3])
+    assert math.dist(ours[0, :2], (2.0, 2.0)) > 1.0
+
+
 def test_movers_that_see_the_robot_move_by_the_shared_code_from_its_3d_path(monkeypatch):
     # The 3D robot slips and sways, so its path is not flatland's; given its path, the movers that
     # react to it (people under the social force, yielding drivers) move as common.motion moves them.
@@ -74,7 +87,7 @@ def test_movers_that_see_the_robot_move_by_the_shared_code_from_its_3d_path(monk
     start = world.reset(seed=5)
     seen = [world.step(0.6, 0.1 * math.sin(0.1 * k)).movers.rows for k in range(80)]
     replay, rng = Movers(world.scenario), mover_generator(5)  # the scenario as the 3D tier runs it: its robot
-    replay.reset(start.pose)
+    replay.reset(start.pose, rng)
     for (pose, v, w), rows in zip(inputs, seen):
         replay.finish(pose, v, w, False, rng)
         assert np.array_equal(replay.states().rows, rows)

@@ -105,6 +105,9 @@ class Movers:
         self._members, self._inside = _groups(I, len(t.objects))
         self._python = bool((I[:, BEHAVIOR] == RVO).any())  # IR-SIM's rvo is NumPy: a Python loop
         self.draws = bool(I[:, WANDER].any())  # whether an episode draws random numbers
+        # Wanderers given a region and no goals: each episode's first goal is drawn at reset, as
+        # IR-SIM draws a wanderer's first at its start.
+        self._goalless = bool(((I[:, WANDER] == 1) & (I[:, ROUTE_LENGTH] == 0)).any())
         self._wanderer_arrived = False
         self._start: tuple[tuple[float, ...], list[np.ndarray]] | None = None  # the last start and its state
         self._neighbors = np.zeros((len(t.objects) + len(t.F), 5))
@@ -148,10 +151,14 @@ class Movers:
         self._packed = (floats, float_layout, ints, int_layout, t.orca_velocity, self._inside, t.irsim, self._dt,
                         self._python, self._mode)
 
-    def reset(self, pose: tuple[float, float, float]) -> None:
+    def reset(self, pose: tuple[float, float, float], rng: np.random.Generator) -> None:
         """Every mover back at its start with its first goal and its first command; the robot at
-        ``pose``, at rest; the groups' plans for the first step."""
+        ``pose``, at rest; the groups' plans for the first step. A wanderer without goals draws
+        its first from ``rng``."""
         start = tuple(pose)
+        if self._goalless:  # each episode draws other first goals: nothing to copy back
+            self._start_afresh(pose, rng)
+            return
         if self._start is not None and self._start[0] == start:
             # The same start as the last one computed: the same state, copied back (a reset from
             # scratch costs tens of microseconds, and training resets every few hundred steps).
@@ -159,7 +166,7 @@ class Movers:
                 np.copyto(live, saved)
             self._wanderer_arrived = False
             return
-        self._start_afresh(pose)
+        self._start_afresh(pose, rng)
         self._start = (start, [array.copy() for array in self._episode_state()])
 
     def _episode_state(self) -> tuple[np.ndarray, ...]:
@@ -168,14 +175,18 @@ class Movers:
         return (t.F, t.I, t.goals, t.objects, t.orca_velocity, self._states, self._circle_rows, self._box_rows,
                 self._robot)
 
-    def _start_afresh(self, pose: tuple[float, float, float]) -> None:
+    def _start_afresh(self, pose: tuple[float, float, float], rng: np.random.Generator) -> None:
         t = self.table
         F, I = t.F, t.I  # noqa: E741
         F[:, X], F[:, Y], F[:, THETA] = F[:, START_X], F[:, START_Y], F[:, INIT_THETA]
         F[:, V0], F[:, V1] = F[:, INIT_V0], F[:, INIT_V1]
-        I[:, STOPPED] = I[:, ARRIVED] = I[:, PLANNED] = 0
+        I[:, STOPPED] = I[:, PLANNED] = 0
+        # A goalless wanderer starts as if it had arrived, so it draws a goal before anything plans.
+        I[:, ARRIVED] = (I[:, WANDER] == 1) & (I[:, ROUTE_LENGTH] == 0)
         t.goals[:] = t.routes
         I[:, HEAD], I[:, TAIL] = 0, np.maximum(I[:, ROUTE_LENGTH], 1)
+        if self._goalless:
+            draw_wanderers(F, I, t.goals, rng)
         t.orca_velocity[:] = 0.0
         t.objects[:] = self._initial_objects
         self._wanderer_arrived = False

@@ -186,7 +186,8 @@ def mover_table(scenario: Scenario) -> MoverTable:
                      int(motion.route != "once" and motion.wander is None), int(motion.wander is not None), 0, 0, 0, 0,
                      len(route), index + 1, 0, int(obstacle is None),
                      RVO_MODES.index(behavior.mode) if isinstance(behavior, Rvo) else 0, size])
-        route_table[m, :len(route)] = route
+        if route:  # a wanderer without goals draws its first at reset (Movers.reset)
+            route_table[m, :len(route)] = route
         params.append(_behavior_row(motion, step_time))
     objects, segments = _objects(scenario, irsim)
     return MoverTable(np.array(floats, dtype=float).reshape(n, FLOATS), np.array(ints, dtype=np.int64).reshape(n, INTS),
