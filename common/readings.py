@@ -35,22 +35,26 @@ class Imu(NamedTuple):
 class Contact(NamedTuple):
     """What the robot touched in a step: ``"static"`` geometry or a ``"mover"`` (``mover``: its row
     in ``Readings.movers``), and who moved into whom (``by``: ``"robot"`` if it closed on the mover
-    at least as fast as the mover closed on it, else ``"mover"``; always ``"robot"`` for static)."""
+    and at least as fast as the mover closed on it, else ``"mover"``; always ``"robot"`` for static)."""
 
     kind: str
     mover: int
     by: str
 
 
-def mover_fault(pose: tuple[float, float, float], v: float, mover: np.ndarray) -> str:
-    """Who moved into whom (:attr:`Contact.by`): the robot at ``pose`` driving at ``v``, if it closed
-    on the mover at least as fast as the mover closed on it (``mover``: a row of ``Readings.movers``)."""
+def mover_fault(pose: tuple[float, float, float], v: float, mover: np.ndarray, lateral: float = 0.0) -> str:
+    """Who moved into whom (:attr:`Contact.by`): the robot at ``pose`` driving at ``v`` (and
+    sideways at ``lateral``, an omnidirectional robot), if it closed on the mover, and at least as
+    fast as the mover closed on it (``mover``: a row of ``Readings.movers``). A robot that did not
+    close on it (standing, or moving away) did not move into it, whatever the mover's centre did:
+    a forklift turning in place sweeps its ends with its centre standing still."""
     x, y, yaw = pose
     dx, dy = mover[0] - x, mover[1] - y
     distance = math.hypot(dx, dy) or 1.0
-    robot_closing = v * (math.cos(yaw) * dx + math.sin(yaw) * dy) / distance
+    c, s = math.cos(yaw), math.sin(yaw)
+    robot_closing = ((v * c - lateral * s) * dx + (v * s + lateral * c) * dy) / distance
     mover_closing = -(mover[3] * dx + mover[4] * dy) / distance
-    return "robot" if robot_closing >= mover_closing else "mover"
+    return "robot" if robot_closing > 0.0 and robot_closing >= mover_closing else "mover"
 
 
 class Readings(NamedTuple):

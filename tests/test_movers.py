@@ -122,6 +122,19 @@ def test_the_robot_driving_into_a_standing_mover_is_its_collision():
     assert readings.pose.x == pytest.approx(3.0 - 0.45, abs=0.1)
 
 
+def test_who_moved_into_whom_counts_the_robots_sideways_speed_and_never_blames_it_standing():
+    from common.readings import mover_fault
+
+    # A forklift turning in place at the end of its patrol: its centre still, its end sweeping
+    # into a robot that stands still (a tie of two zero speeds once blamed the robot).
+    turning = np.array([2.0, 1.0, 0.5, 0.0, 0.0, 0.58, 1.0, 0.6])
+    assert mover_fault((1.0, 1.0, 0.0), 0.0, turning) == "mover"
+    # An omnidirectional robot sliding left at 1 m/s into a person creeping toward it at 0.1 m/s.
+    creeping = np.array([1.0, 2.0, 0.0, 0.0, -0.1, 0.25, 0.0, 0.0])
+    assert mover_fault((1.0, 1.0, 0.0), 0.0, creeping, lateral=1.0) == "robot"
+    assert mover_fault((1.0, 1.0, 0.0), 0.0, creeping) == "mover"
+
+
 def test_in_stop_mode_a_mover_halts_on_touching_a_wall_and_otherwise_passes_through():
     wall = SegmentObstacle(points=[(5.0, 3.0), (5.0, 7.0)])
 
