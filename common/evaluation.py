@@ -28,7 +28,7 @@ import numpy as np
 from scipy import stats
 
 from common.conditions import Conditions
-from common.geometry import box_distance
+from common.geometry import box_distance, box_gap
 from common.readings import Readings
 from common.route import Route
 from common.scenario import LidarSpec, RobotProfile, Scenario
@@ -100,11 +100,17 @@ class SocialRecord:
         x, y, yaw = readings.pose
         c, s = math.cos(yaw), math.sin(yaw)
         x, y = x + self.robot.footprint_offset * c, y + self.robot.footprint_offset * s  # the footprint's centre
-        if self.robot.shape == "circle":
-            gaps = np.hypot(rows[:, 0] - x, rows[:, 1] - y) - self.robot.radius - rows[:, 5]
+        robot = self.robot
+        if robot.shape == "circle":
+            gaps = np.hypot(rows[:, 0] - x, rows[:, 1] - y) - robot.radius - rows[:, 5]
+            for k in np.flatnonzero(rows[:, 6] > 0.0):  # a box-shaped person: its box, not the circle around it
+                px, py, heading, length, width = rows[k, [0, 1, 2, 6, 7]]
+                gaps[k] = box_distance(x, y, px, py, length, width, math.cos(heading), math.sin(heading)) - robot.radius
         else:
-            gaps = np.array([box_distance(px, py, x, y, self.robot.length, self.robot.width, c, s) - r
-                             for px, py, r in rows[:, [0, 1, 5]]])
+            footprint = (x, y, yaw, robot.length, robot.width)
+            gaps = np.array([box_gap(footprint, row[[0, 1, 2, 6, 7]]) if row[6] > 0.0 else
+                             box_distance(row[0], row[1], x, y, robot.length, robot.width, c, s) - row[5]
+                             for row in rows])
         nearest = float(gaps.min())
         self.min_gap = nearest if self.min_gap is None else min(self.min_gap, nearest)
         if nearest < PERSONAL_SPACE:

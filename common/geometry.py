@@ -9,6 +9,7 @@ compiled loops: the generators call them thousands of times a scenario on a hand
 from __future__ import annotations
 
 import math
+from typing import Sequence
 
 import numpy as np
 from numba.extending import register_jitable
@@ -169,6 +170,18 @@ def segment_box_gap(ax: float, ay: float, bx: float, by: float, cx: float, cy: f
                    (half_length, -half_width)):
         gap = min(gap, segment_distance(kx, ky, ux, uy, vx, vy))
     return gap
+
+
+def box_gap(a: Sequence[float], b: Sequence[float]) -> float:
+    """Distance between two boxes, each (x, y, yaw, length, width); 0 where they overlap."""
+    bx, by, b_yaw, b_length, b_width = b
+    c, s = math.cos(b_yaw), math.sin(b_yaw)
+    if box_distance(bx, by, a[0], a[1], a[3], a[4], math.cos(a[2]), math.sin(a[2])) <= 0.0:
+        return 0.0  # b's centre inside a (so is b, should it be the smaller)
+    # Otherwise they overlap only where an edge of a enters b; apart, the nearest pair has an edge of a in it.
+    corners = box_corners(a[0], a[1], a[3], a[4], a[2])
+    return min(segment_box_gap(*corners[k - 1], *corners[k], bx, by, c, s, 0.5 * b_length, 0.5 * b_width)
+               for k in range(4))
 
 
 @register_jitable

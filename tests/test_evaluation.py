@@ -10,7 +10,7 @@ from common.errors import ConfigError
 from common.evaluation import Episode, evaluate, run_episode, shortest_path_length, summarise, wilson_interval
 from common.kinematics import wrap_angle
 from common.curriculum.comparison import bar_chart, markdown_table, write_csv
-from common.scenario import CircleObstacle, Scenario
+from common.scenario import BoxObstacle, CircleObstacle, RobotProfile, Scenario
 
 
 class Scripted:
@@ -159,3 +159,27 @@ def test_the_paired_table_sets_each_agent_against_the_one_that_arrived_most_ofte
     assert paired_table([best]) == ""
     far = summarise("far", _arrivals("far", "cccccccc" + "cc"))
     assert "| far | 0 | 10 | < 0.01 |" in paired_table([best, far])  # p = 2 / 1024
+
+
+@pytest.mark.parametrize("robot", [RobotProfile(radius=0.2), RobotProfile(shape="box", length=0.4, width=0.4)],
+                         ids=["circle", "box"])
+def test_a_box_shaped_persons_gap_is_measured_to_its_box_not_the_circle_around_it(robot):
+    # A cart (1.0 x 0.6 m, counted as a person: the default label) passes 0.3 m beside a robot
+    # standing still, its long side to the robot. Its bounding circle reached 0.28 m closer.
+    from common.evaluation import SocialRecord
+    from common.motion.spec import Dash, Motion
+    from flatland.world import World
+
+    cart = BoxObstacle(x=2.0, y=5.8, length=1.0, width=0.6,
+                       motion=Motion(behavior=Dash(), goals=[(8.0, 5.8)], vel_max=(1.0, 1.0), reacts_to_robot=False))
+    world = World(Scenario(robot=robot, start=(5.0, 5.0, 0.0), goal=(9.0, 1.0), obstacles=[cart]), seed=0)
+    social = SocialRecord(robot)
+    social(world.reset())
+    for _ in range(60):
+        social(world.step(0.0, 0.0))
+    assert social.min_gap == pytest.approx(0.3, abs=1e-9)
+    # Within 0.5 m while the cart's near end is close enough: its centre within 0.5 m plus, for the
+    # disc, sqrt(0.7^2 - 0.5^2) (a corner 0.5 m above its centre) and, for the box, 0.2 + sqrt(0.5^2 - 0.3^2)
+    # (a corner 0.3 m above the robot's) either side of the robot's x.
+    reach = 0.5 + (math.sqrt(0.7**2 - 0.5**2) if robot.shape == "circle" else 0.2 + math.sqrt(0.5**2 - 0.3**2))
+    assert social.time_near == pytest.approx(2 * reach, abs=0.11)
