@@ -24,7 +24,9 @@ rows. The suites keep that mix, as their figures were measured on it.
 
 Options (a suite's variants): ``reacting`` (True or False: every person and driver sees the robot, or none)
 and ``behavior`` (``orca`` or ``sfm`` for the whole crowd). Movers pass through each other and
-through nothing else (collision mode ``unobstructed_obstacles``); the robot stops on any contact.
+through static geometry too (collision mode ``unobstructed_obstacles``, IR-SIM's); the robot
+stops on any contact. In the crossing corridors that lets people pushed sideways cross a wall and
+walk on behind it (docs/movers.md#known-limits).
 Each kind draws from its own seeded stream, so the static kinds' scenarios are untouched. The
 placements are compiled loops on the caller's generator: a new scenario costs well under a
 millisecond (``curriculum bench``'s ``reset_ms_*``).
