@@ -177,7 +177,7 @@ def box_gap(a: Sequence[float], b: Sequence[float]) -> float:
     bx, by, b_yaw, b_length, b_width = b
     c, s = math.cos(b_yaw), math.sin(b_yaw)
     if box_distance(bx, by, a[0], a[1], a[3], a[4], math.cos(a[2]), math.sin(a[2])) <= 0.0:
-        return 0.0  # b's centre inside a (so is b, should it be the smaller)
+        return 0.0  # b's centre is inside a: they overlap
     # Otherwise they overlap only where an edge of a enters b; apart, the nearest pair has an edge of a in it.
     corners = box_corners(a[0], a[1], a[3], a[4], a[2])
     return min(segment_box_gap(*corners[k - 1], *corners[k], bx, by, c, s, 0.5 * b_length, 0.5 * b_width)
