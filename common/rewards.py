@@ -104,8 +104,10 @@ def spin(ctx: StepContext, threshold: float = 0.8) -> float:
 
 
 class _Stuck:
-    """1 when the last ``window`` steps gained less than ``threshold`` metres in all, farther than
-    ``min_distance`` from the goal. Stateful: it keeps the recent progress."""
+    """1 when the distance to the goal changed by less than ``threshold`` metres, either way, over
+    the last ``window`` steps, farther than ``min_distance`` from the goal: the 3D tutorial's
+    ``abs(sum(recent_progress))``, so a robot backing away is not stuck. Stateful: it keeps the
+    recent progress."""
 
     def __init__(self, window: int = 20, threshold: float = 0.05, min_distance: float = 1.0) -> None:
         self.window, self.threshold, self.min_distance = window, threshold, min_distance
