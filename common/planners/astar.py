@@ -224,7 +224,8 @@ def _astar_lattice(field: np.ndarray, occupied: np.ndarray, x0: float, y0: float
 
 class AStar:
     """A* between the cells of start and goal; the path runs through cell centres, with the exact
-    start and goal points in place of their own cells' centres.
+    start and goal points in place of their own cells' centres (on a footprint grid, the goal's
+    cell centre stays where the footprint cannot drive on to the goal itself).
 
     On a :class:`~common.planners.footprint.FootprintGrid` it searches positions and headings
     (see the module): ``turn_cost`` (m per 45° turn), ``weight`` and ``band`` (m) shape the cost
@@ -261,5 +262,12 @@ class AStar:
         x0, y0 = grid.origin
         points = np.column_stack([x0 + (cells % cols + 0.5) * grid.resolution, y0 + (cells // cols + 0.5) * grid.resolution])
         points[0] = sx, sy
+        centre = points[-1].copy()
         points[-1] = gx, gy
+        # The lattice checked the footprint into the goal cell's centre, not along a last step
+        # bent towards the exact goal: where that step (or the turn onto it) clips, end at the centre.
+        if isinstance(grid, FootprintGrid):
+            heading = None if len(points) > 2 or math.isnan(yaw) else yaw
+            if not grid.path_free(points[-3:], heading):
+                points[-1] = centre
         return points
