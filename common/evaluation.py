@@ -121,7 +121,9 @@ def shortest_path_length(scenario: Scenario, goal_radius: float | None = None, r
     """Length of the A* path on the ground-truth grid (inflated by the robot's radius), less the goal
     radius (default the scenario's). Where the inflated grid blocks the start or the goal (a
     hand-made file may put either near an obstacle), the straight-line distance stands in: a lower
-    bound, so SPL errs low."""
+    bound, so SPL errs low. Otherwise it errs high: the grid path (8-connected, through cell
+    centres, for the robot's bounding circle) is up to 8.2% longer than the shortest
+    (docs/cli.md), kept so that the published SPLs stay comparable."""
     from common.occupancy import scenario_grid
     from common.planners.astar import AStar, path_length
 
