@@ -13,7 +13,7 @@ from common.errors import ConfigError
 from common.generators import generate
 from common.kinematics import Pose2D
 from common.readings import Odometry
-from common.scenario import CircleObstacle, RobotProfile, Scenario
+from common.scenario import CircleObstacle, RobotProfile, Scenario, WorldSpec
 from flatland.world import World
 
 AVOIDERS = ["reactive", "potential_field", "pid_blend"]
@@ -101,7 +101,7 @@ def test_avoiders_go_round_a_circle_exactly_on_the_route(name):
     assert rollout(make_controller(name), single_circle(5.0)).outcome == "success"
 
 
-def test_reactive_scales_its_turn_to_a_slower_robot():
+def test_reactive_turns_a_slower_robot_at_its_own_limit():
     robot = RobotProfile(w_max=0.5)
     episode = rollout(make_controller("reactive"), single_circle(5.15).model_copy(update={"robot": robot}))
     avoiding = [(v, w) for v, w in episode.commands if v == pytest.approx(0.1)]
@@ -130,15 +130,21 @@ def test_potential_field_halts_in_front_of_a_trap():
 
 
 def test_pid_infers_its_step_time_from_the_readings():
-    given = rollout(make_controller("pid_blend", {"step_time": 0.1}), single_circle(5.15))
-    inferred = rollout(make_controller("pid_blend"), single_circle(5.15))
+    # A world stepping 0.05 s, not the default 0.1 s, so a step time taken for granted shows.
+    scenario = single_circle(5.15).model_copy(update={"world": WorldSpec(step_time=0.05)})
+    given = rollout(make_controller("pid_blend", {"step_time": 0.05}), scenario)
+    inferred = rollout(make_controller("pid_blend"), scenario)
     np.testing.assert_allclose(np.array(inferred.commands), np.array(given.commands), atol=1e-9)
+    assumed = rollout(make_controller("pid_blend", {"step_time": 0.1}), scenario)
+    n = min(len(assumed.commands), len(given.commands))
+    assert not np.allclose(np.array(assumed.commands[:n]), np.array(given.commands[:n]))
 
 
 def test_pid_integral_is_bounded_and_reset():
-    controller = make_controller("pid_blend", {"integral_limit": 0.2})
-    rollout(controller, Scenario(start=(5.0, 5.0, 0.0), goal=(2.0, 5.5)), max_steps=20)  # saturated turning
-    assert abs(controller._integral) <= 0.2
+    # Turning to a goal behind, unsaturated: the integral grows past 0.02 within 40 steps unless clamped.
+    controller = make_controller("pid_blend", {"integral_limit": 0.02})
+    rollout(controller, Scenario(start=(5.0, 5.0, 0.0), goal=(2.0, 5.5)), max_steps=40)
+    assert abs(controller._integral) == pytest.approx(0.02)
     controller.reset()
     assert controller._integral == 0.0
 

@@ -168,14 +168,16 @@ def commands(seed: int, n: int = 200) -> np.ndarray:
     return np.column_stack([rng.uniform(0.0, 1.0, n), rng.uniform(-1.0, 1.0, n)])
 
 
-def drive(odometry: WheelOdometry, cmds: np.ndarray, dt: float = 0.1) -> tuple[Pose2D, Pose2D]:
-    """Feed true wheel speeds to the odometry; return (estimated, true) final poses."""
+def drive(odometry: WheelOdometry, cmds: np.ndarray, dt: float = 0.1,
+          integrate=unicycle_exact) -> tuple[Pose2D, Pose2D]:
+    """Feed true wheel speeds to the odometry; return (estimated, true) final poses, the truth
+    integrated by ``integrate``."""
     start = Pose2D(1.0, 2.0, 0.5)
     odometry.reset(start)
     truth = start
     for v, w in cmds:
         odometry.update(*wheel_speeds(v, w, odometry.wheel_radius, odometry.wheel_base), dt)
-        truth = odometry.integrate(truth, v, w, dt)
+        truth = integrate(truth, v, w, dt)
     return odometry.pose, truth
 
 
@@ -187,7 +189,7 @@ def make_odometry(noise: float, seed: int = 0, integrate=unicycle_exact) -> Whee
 def test_noiseless_odometry_tracks_the_integrator(name):
     odometry = make_odometry(0.0, integrate=INTEGRATORS[name])
     cmds = commands(2)
-    estimate, truth = drive(odometry, cmds)
+    estimate, truth = drive(odometry, cmds, integrate=INTEGRATORS[name])
     assert_allclose(estimate, truth, atol=1e-9)
     assert_allclose((odometry.v, odometry.w), cmds[-1], atol=1e-12)
 

@@ -28,13 +28,18 @@ def test_layouts_are_seeded_valid_and_reachable(kind):
 
 def test_difficulty_sets_the_crowd_its_speed_and_who_sees_the_robot():
     assert crowd_size(0.5) == (12, pytest.approx(1.2))
-    for difficulty, unaware in ((0.0, 0.0), (0.5, 0.0), (1.0, 1.0)):
+    blind, fastest = {}, {}
+    for difficulty in (0.0, 0.5, 0.75, 1.0):
         scenario = generate("crowd", 3, difficulty)
         people = scenario.movers
         assert len(people) == crowd_size(difficulty)[0]
         speeds = [max(p.motion.vel_max) for p in people]
         assert 0.5 <= min(speeds) and max(speeds) <= crowd_size(difficulty)[1] + 1e-9
-        assert np.mean([not p.motion.reacts_to_robot for p in people]) == unaware
+        blind[difficulty] = np.mean([not p.motion.reacts_to_robot for p in people])
+        fastest[difficulty] = max(speeds)
+    # Nobody blind up to 0.5, then a growing share (each of the 16 at 0.75 with probability 0.5), all at 1.
+    assert blind[0.0] == blind[0.5] == 0.0 and 0.25 <= blind[0.75] <= 0.75 and blind[1.0] == 1.0
+    assert fastest[0.0] == 0.5 and fastest[1.0] > 1.5  # walkers up to 1.9 m/s at 1
 
 
 def test_the_crowd_suites_are_twelve_people_seeing_the_robot_or_not():

@@ -40,10 +40,9 @@ class ReactiveAvoidance(GoToGoal):
             return 0.0, 0.0
         nearest = self.nearest_front(readings.lidar)
         if nearest is not None and nearest[0] < self.robot.bounding_radius + self.clearance:
-            # A return on the left (positive angle) means turn right, and vice versa. The tutorial's
-            # 0.8 rad/s is scaled down to a slower robot's limit rather than clipped by surprise.
-            turn = min(self.avoid_w, self.robot.w_max)
-            return self.clip(self.avoid_v, -turn if nearest[1] > 0.0 else turn)
+            # A return on the left (positive angle) means turn right, and vice versa; clip brings
+            # the tutorial's 0.8 rad/s down to a slower robot's limit.
+            return self.clip(self.avoid_v, -self.avoid_w if nearest[1] > 0.0 else self.avoid_w)
         return self.clip(*self.goal_command(distance, error))
 
     def nearest_front(self, ranges: np.ndarray) -> tuple[float, float] | None:
