@@ -12,7 +12,7 @@ from common.kinematics import Pose2D
 
 if TYPE_CHECKING:
     from common.motion.movers import MoverStates
-    from common.scenario import LidarSpec
+    from common.scenario import LidarSpec, RobotProfile
 
 
 class Odometry(NamedTuple):
@@ -34,25 +34,42 @@ class Imu(NamedTuple):
 
 class Contact(NamedTuple):
     """What the robot touched in a step: ``"static"`` geometry or a ``"mover"`` (``mover``: its row
-    in ``Readings.movers``), and who moved into whom (``by``: ``"robot"`` if it closed on the mover
-    and at least as fast as the mover closed on it, else ``"mover"``; always ``"robot"`` for static)."""
+    in ``Readings.movers``), and who moved into whom (``by``: ``"robot"`` if the robot's outline
+    closed on the mover, at least as fast as the mover closed on it, else ``"mover"``; always
+    ``"robot"`` for static)."""
 
     kind: str
     mover: int
     by: str
 
 
-def mover_fault(pose: tuple[float, float, float], v: float, mover: np.ndarray, lateral: float = 0.0) -> str:
-    """Who moved into whom (:attr:`Contact.by`): the robot at ``pose`` driving at ``v`` (and
-    sideways at ``lateral``, an omnidirectional robot), if it closed on the mover, and at least as
-    fast as the mover closed on it (``mover``: a row of ``Readings.movers``). A robot that did not
-    close on it (standing, or moving away) did not move into it, whatever the mover's centre did:
-    a forklift turning in place sweeps its ends with its centre standing still."""
+def mover_fault(pose: tuple[float, float, float], motion: tuple[float, float, float], mover: np.ndarray,
+                robot: RobotProfile) -> str:
+    """Who moved into whom (:attr:`Contact.by`) when ``robot`` (a circle or a box) at ``pose``,
+    moving at ``motion`` (forward m/s, sideways m/s, turn rad/s), touched ``mover`` (a row of
+    ``Readings.movers``): the robot, if the point of its outline nearest the mover's centre closed
+    on it, turning included (a box's corners sweep as it turns), at least as fast as the mover's
+    centre closed on the robot; else the mover. A mover's own turn is not known (a forklift
+    turning in place sweeps its ends with its centre standing still), so a robot that did not
+    close on it is never at fault."""
     x, y, yaw = pose
-    dx, dy = mover[0] - x, mover[1] - y
-    distance = math.hypot(dx, dy) or 1.0
+    v, lateral, w = motion
     c, s = math.cos(yaw), math.sin(yaw)
-    robot_closing = ((v * c - lateral * s) * dx + (v * s + lateral * c) * dy) / distance
+    cx, cy = x + robot.footprint_offset * c, y + robot.footprint_offset * s  # the footprint's centre
+    du, dv = c * (mover[0] - cx) + s * (mover[1] - cy), -s * (mover[0] - cx) + c * (mover[1] - cy)  # robot frame
+    if robot.shape == "box":
+        du, dv = min(max(du, -0.5 * robot.length), 0.5 * robot.length), min(max(dv, -0.5 * robot.width), 0.5 * robot.width)
+    else:
+        scale = robot.radius / (math.hypot(du, dv) or math.inf)
+        du, dv = du * scale, dv * scale
+    px, py = cx + c * du - s * dv, cy + s * du + c * dv
+    dx, dy = mover[0] - px, mover[1] - py
+    distance = math.hypot(dx, dy)
+    if distance < 1e-9:  # the mover's centre on the robot's outline or inside it: no direction between them
+        return "robot" if math.hypot(v, lateral) >= math.hypot(mover[3], mover[4]) else "mover"
+    vx = v * c - lateral * s - w * (py - y)  # the point's velocity: the robot's, turning about its pose
+    vy = v * s + lateral * c + w * (px - x)
+    robot_closing = (vx * dx + vy * dy) / distance
     mover_closing = -(mover[3] * dx + mover[4] * dy) / distance
     return "robot" if robot_closing > 0.0 and robot_closing >= mover_closing else "mover"
 

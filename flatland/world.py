@@ -351,7 +351,8 @@ class World:
         if self._touching_static:
             contact = Contact("static", -1, "robot")
         elif touched >= 0:
-            contact = Contact("mover", touched, mover_fault(self.pose, self.velocity[0], movers.states().rows[touched], lateral))
+            contact = Contact("mover", touched, mover_fault(self.pose, (v, lateral, w), movers.states().rows[touched],
+                                                              self.scenario.robot))
         self.stopped = contact is not None and self._halts
         self.readings = self._read(acceleration, ranges, contact)
         return self.readings

@@ -204,7 +204,7 @@ class World:
         if drawn.mass_scale is not None:
             self.robot.set_mass_scale(drawn.mass_scale)
         self.robot.drive(0.0, 0.0)
-        self._driving = 0.0  # the speed the wheels are driven at
+        self._driving = (0.0, 0.0)  # the (v, w) the wheels are driven at
         self.steps = 0
         self._angles = self.robot.wheel_angles()
         self.odometry.reset(self.pose())
@@ -226,7 +226,7 @@ class World:
         if not self.actuator.idle:
             v, w = self.actuator(v, w, self.period)
         self.robot.drive(v, w)
-        self._driving = v
+        self._driving = (v, w)
         # A contact at any sub-step counts: a graze that separates again within the control period
         # is a collision too, not only one still touching at its end.
         touched: list[int] = []
@@ -318,7 +318,9 @@ class World:
             return Contact("static", -1, "robot")
         # Judged by the speed the robot was driven at this period, as flatland judges it: at the
         # contact itself the body has already been stopped, or pushed back, by what it met.
-        return Contact("mover", rows[0], mover_fault(self.pose(), self._driving, self.movers.states().rows[rows[0]]))
+        v, w = self._driving
+        return Contact("mover", rows[0], mover_fault(self.pose(), (v, 0.0, w), self.movers.states().rows[rows[0]],
+                                                     self.scenario.robot))
 
     def _read(self, dt: float, touched: list[int], state: BodyState) -> Readings:
         """The readings after a period ``dt`` in which the robot touched ``touched``, ending in

@@ -14,7 +14,8 @@ import pytest
 
 from common.errors import ConfigError
 from common.motion.spec import Dash, Motion, Orca, Sfm
-from common.scenario import BoxObstacle, CircleObstacle, LidarSpec, Scenario, SegmentObstacle, WorldSpec, scenario_from_mapping
+from common.scenario import (BoxObstacle, CircleObstacle, LidarSpec, RobotProfile, Scenario, SegmentObstacle, WorldSpec,
+                             scenario_from_mapping)
 from flatland.world import World
 
 
@@ -122,17 +123,35 @@ def test_the_robot_driving_into_a_standing_mover_is_its_collision():
     assert readings.pose.x == pytest.approx(3.0 - 0.45, abs=0.1)
 
 
-def test_who_moved_into_whom_counts_the_robots_sideways_speed_and_never_blames_it_standing():
+def test_who_moved_into_whom_is_judged_at_the_robots_outline_turning_and_sideways_included():
     from common.readings import mover_fault
 
+    disc, box = RobotProfile(radius=0.2), RobotProfile(shape="box", length=1.2, width=0.4)
     # A forklift turning in place at the end of its patrol: its centre still, its end sweeping
     # into a robot that stands still (a tie of two zero speeds once blamed the robot).
     turning = np.array([2.0, 1.0, 0.5, 0.0, 0.0, 0.58, 1.0, 0.6])
-    assert mover_fault((1.0, 1.0, 0.0), 0.0, turning) == "mover"
+    assert mover_fault((1.0, 1.0, 0.0), (0.0, 0.0, 0.0), turning, disc) == "mover"
+    # The reverse: a long robot turning in place sweeps its front end into a person standing beside it.
+    standing = np.array([1.5, 1.5, 0.0, 0.0, 0.0, 0.25, 0.0, 0.0])
+    assert mover_fault((1.0, 1.0, 0.0), (0.0, 0.0, 1.0), standing, box) == "robot"
+    assert mover_fault((1.0, 1.0, 0.0), (0.0, 0.0, -1.0), standing, box) == "mover"  # turning away from it
     # An omnidirectional robot sliding left at 1 m/s into a person creeping toward it at 0.1 m/s.
     creeping = np.array([1.0, 2.0, 0.0, 0.0, -0.1, 0.25, 0.0, 0.0])
-    assert mover_fault((1.0, 1.0, 0.0), 0.0, creeping, lateral=1.0) == "robot"
-    assert mover_fault((1.0, 1.0, 0.0), 0.0, creeping) == "mover"
+    assert mover_fault((1.0, 1.0, 0.0), (0.0, 1.0, 0.0), creeping, disc) == "robot"
+    assert mover_fault((1.0, 1.0, 0.0), (0.0, 0.0, 0.0), creeping, disc) == "mover"
+
+
+def test_an_omnidirectional_robot_sliding_into_a_person_is_its_collision():
+    # The world passes the robot's sideways speed on to the judgement (a person creeping towards it).
+    creeping = CircleObstacle(x=5.0, y=6.0, radius=0.25, motion=Motion(goals=[(5.0, 4.0)], vel_max=(0.1, 0.1)))
+    world = World(Scenario(robot=RobotProfile(kinematics="omni"), start=(5.0, 5.0, 0.0), goal=(9.0, 1.0),
+                           obstacles=[creeping]), seed=0)
+    world.reset()
+    for _ in range(30):
+        readings = world.step(0.0, 1.0)  # forward 0, left 1 m/s
+        if readings.collided:
+            break
+    assert readings.contact == ("mover", 0, "robot")
 
 
 def test_in_stop_mode_a_mover_halts_on_touching_a_wall_and_otherwise_passes_through():
