@@ -103,18 +103,22 @@ class SocialRecord:
         robot = self.robot
         if robot.shape == "circle":
             gaps = np.hypot(rows[:, 0] - x, rows[:, 1] - y) - robot.radius - rows[:, 5]
-            for k in np.flatnonzero(rows[:, 6] > 0.0):  # a box-shaped person: its box, not the circle around it
-                px, py, heading, length, width = rows[k, [0, 1, 2, 6, 7]]
-                gaps[k] = box_distance(x, y, px, py, length, width, math.cos(heading), math.sin(heading)) - robot.radius
         else:
-            footprint = (x, y, yaw, robot.length, robot.width)
-            gaps = np.array([box_gap(footprint, row[[0, 1, 2, 6, 7]]) if row[6] > 0.0 else
-                             box_distance(row[0], row[1], x, y, robot.length, robot.width, c, s) - row[5]
-                             for row in rows])
+            gaps = np.array([box_distance(px, py, x, y, robot.length, robot.width, c, s) - r
+                             for px, py, r in rows[:, [0, 1, 5]]])
+        for k in np.flatnonzero(rows[:, 6] > 0.0):  # a box-shaped person: its box, not the circle round it
+            gaps[k] = self._box_gap(x, y, yaw, rows[k])
         nearest = float(gaps.min())
         self.min_gap = nearest if self.min_gap is None else min(self.min_gap, nearest)
         if nearest < PERSONAL_SPACE:
             self.time_near += dt
+
+    def _box_gap(self, x: float, y: float, yaw: float, person: np.ndarray) -> float:
+        """The gap between the robot's footprint (centred at x, y) and a box-shaped person's box."""
+        px, py, heading, length, width = person[[0, 1, 2, 6, 7]]
+        if self.robot.shape == "circle":
+            return box_distance(x, y, px, py, length, width, math.cos(heading), math.sin(heading)) - self.robot.radius
+        return box_gap((x, y, yaw, self.robot.length, self.robot.width), (px, py, heading, length, width))
 
 
 def shortest_path_length(scenario: Scenario, goal_radius: float | None = None, resolution: float = 0.1) -> float:

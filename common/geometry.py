@@ -173,13 +173,23 @@ def segment_box_gap(ax: float, ay: float, bx: float, by: float, cx: float, cy: f
 
 
 def box_gap(a: Sequence[float], b: Sequence[float]) -> float:
-    """Distance between two boxes, each (x, y, yaw, length, width); 0 where they overlap."""
+    """Signed distance between two boxes, each (x, y, yaw, length, width): the gap between them,
+    or where they overlap minus its depth (the least shift along a side's normal that parts them),
+    as a circle's gap is its centre distance less both radii."""
+    ax, ay, a_yaw, a_length, a_width = a
     bx, by, b_yaw, b_length, b_width = b
+    separation = -math.inf  # the separating-axis test over the four sides' normals
+    for yaw in (a_yaw, a_yaw + 0.5 * math.pi, b_yaw, b_yaw + 0.5 * math.pi):
+        nx, ny = math.cos(yaw), math.sin(yaw)
+        reach = sum(0.5 * length * abs(nx * math.cos(own) + ny * math.sin(own))
+                    + 0.5 * width * abs(-nx * math.sin(own) + ny * math.cos(own))
+                    for own, length, width in ((a_yaw, a_length, a_width), (b_yaw, b_length, b_width)))
+        separation = max(separation, abs(nx * (bx - ax) + ny * (by - ay)) - reach)
+    if separation <= 0.0:
+        return separation
+    # Apart, the nearest pair of points has an edge of a in it (a corner of one, or a side against a corner).
+    corners = box_corners(ax, ay, a_length, a_width, a_yaw)
     c, s = math.cos(b_yaw), math.sin(b_yaw)
-    if box_distance(bx, by, a[0], a[1], a[3], a[4], math.cos(a[2]), math.sin(a[2])) <= 0.0:
-        return 0.0  # b's centre is inside a: they overlap
-    # Otherwise they overlap only where an edge of a enters b; apart, the nearest pair has an edge of a in it.
-    corners = box_corners(a[0], a[1], a[3], a[4], a[2])
     return min(segment_box_gap(*corners[k - 1], *corners[k], bx, by, c, s, 0.5 * b_length, 0.5 * b_width)
                for k in range(4))
 

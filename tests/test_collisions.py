@@ -160,6 +160,21 @@ def test_segment_gaps_to_boxes_and_segments_match_sampled_distances():
     assert segments_gap(-1.0, 0.0, 1.0, 0.0, 0.0, -1.0, 0.0, 1.0) == 0.0
 
 
+@pytest.mark.parametrize(("a", "b", "gap"), [
+    ((0.0, 0.0, 0.0, 1.0, 1.0), (1.5, 0.0, 0.0, 1.0, 1.0), 0.5),  # side by side
+    ((0.0, 0.0, 0.0, 1.0, 1.0), (0.5 + 0.3 + math.sqrt(0.5), 0.0, math.pi / 4, 1.0, 1.0), 0.3),  # a corner at a side
+    ((0.0, 0.0, math.pi / 4, 1.0, 1.0), (0.0, 0.5 + 0.3 + math.sqrt(0.5), 0.0, 1.0, 1.0), 0.3),  # and the other way
+    ((0.0, 0.0, 0.0, 1.0, 1.0), (1.2, 1.2, 0.0, 1.0, 1.0), 0.2 * math.sqrt(2.0)),  # corner to corner
+    ((0.0, 0.0, 0.0, 1.0, 1.0), (0.9, 0.0, 0.0, 1.0, 1.0), -0.1),  # overlapping by 0.1 m
+    ((0.0, 0.0, 0.0, 2.0, 2.0), (0.0, 0.0, 0.0, 0.5, 0.5), -1.25),  # one inside the other
+])
+def test_the_signed_gap_between_two_boxes(a, b, gap):
+    from common.geometry import box_gap
+
+    assert box_gap(a, b) == pytest.approx(gap, abs=1e-12)
+    assert box_gap(b, a) == pytest.approx(gap, abs=1e-12)
+
+
 def test_starting_in_contact_is_judged_after_the_first_move_as_in_irsim():
     """The start (1, 5) overlaps a circle at (1.62, 5) by 0.08 m; IR-SIM judges contact after a move."""
     circle = CircleObstacle(x=1.62, y=5.0, radius=0.5)
