@@ -126,8 +126,8 @@ def shortest_path_length(scenario: Scenario, goal_radius: float | None = None, r
     radius (default the scenario's). Where the inflated grid blocks the start or the goal (a
     hand-made file may put either near an obstacle), the straight-line distance stands in: a lower
     bound, so SPL errs low. Otherwise it errs high: the grid path (8-connected, through cell
-    centres, for the robot's bounding circle) is up to 8.2% longer than the shortest
-    (docs/cli.md), kept so that the published SPLs stay comparable."""
+    centres, for the robot's bounding circle) is longer than the shortest, by up to 8.2% on a long
+    open path and more on a short one (docs/cli.md); kept so that the published SPLs stay comparable."""
     from common.occupancy import scenario_grid
     from common.planners.astar import AStar, path_length
 

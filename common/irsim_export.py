@@ -59,10 +59,11 @@ def _mover(obstacle) -> dict[str, Any]:
     """A moving obstacle as IR-SIM's moving object (its behaviour written by the caller)."""
     motion = obstacle.motion
     goals = motion.route_from((obstacle.x, obstacle.y)) if motion.wander is None else list(motion.goals[:1])
-    entry = {**_obstacle(obstacle), "kinematics": {"name": motion.kinematics},
-             "goal": [[x, y, 0.0] for x, y in goals] if len(goals) > 1 else [*goals[0], 0.0],
-             "goal_threshold": motion.goal_threshold, "vel_max": list(motion.vel_max), "vel_min": list(motion.lower),
-             "velocity": list(motion.velocity), "arrive_mode": "position"}
+    entry = {**_obstacle(obstacle), "kinematics": {"name": motion.kinematics}}
+    if goals:  # a wanderer without goals: IR-SIM draws its first in the region, as flatland does
+        entry["goal"] = [[x, y, 0.0] for x, y in goals] if len(goals) > 1 else [*goals[0], 0.0]
+    entry.update({"goal_threshold": motion.goal_threshold, "vel_max": list(motion.vel_max),
+                  "vel_min": list(motion.lower), "velocity": list(motion.velocity), "arrive_mode": "position"})
     if any(math.isfinite(a) for a in motion.acce):
         entry["acce"] = list(motion.acce)
     return entry

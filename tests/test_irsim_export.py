@@ -26,6 +26,16 @@ def test_movers_read_back_from_their_irsim_file(tmp_path):
         assert read.motion.route_from((read.x, read.y)) == mine.motion.route_from((mine.x, mine.y))
 
 
+def test_a_wanderer_without_goals_reads_back_with_its_region(tmp_path):
+    wanderer = CircleObstacle(x=5.0, y=5.0, radius=0.25, motion=Motion(wander=(1.0, 1.0, 9.0, 9.0)))
+    scenario = generate("open", 0, 0.5).model_copy(update={"obstacles": [wanderer]})
+    data = scenario_to_irsim(scenario)
+    (person,) = parse_irsim(data, source=tmp_path / "w.yaml").movers
+    assert person.motion.wander == (1.0, 1.0, 9.0, 9.0)
+    x, y = person.motion.goals[0]  # its first goal, drawn in the region as the file is read
+    assert 1.0 <= x <= 9.0 and 1.0 <= y <= 9.0
+
+
 @pytest.mark.parametrize("robot", [
     RobotProfile(shape="box", length=0.5, width=0.3, v_min=-0.5, accel_v=2.0, accel_w=3.0),
     RobotProfile(kinematics="omni", lateral_max=0.7, accel_lateral=1.5, motion_noise=(0.1, 0.2)),

@@ -107,7 +107,7 @@ class Movers:
         self.draws = bool(I[:, WANDER].any())  # whether an episode draws random numbers
         # Wanderers given a region and no goals: each episode's first goal is drawn at reset, as
         # IR-SIM draws a wanderer's first at its start.
-        self._goalless = bool(((I[:, WANDER] == 1) & (I[:, ROUTE_LENGTH] == 0)).any())
+        self._goalless = (I[:, WANDER] == 1) & (I[:, ROUTE_LENGTH] == 0)
         self._wanderer_arrived = False
         self._start: tuple[tuple[float, ...], list[np.ndarray]] | None = None  # the last start and its state
         self._neighbors = np.zeros((len(t.objects) + len(t.F), 5))
@@ -156,7 +156,7 @@ class Movers:
         ``pose``, at rest; the groups' plans for the first step. A wanderer without goals draws
         its first from ``rng``."""
         start = tuple(pose)
-        if self._goalless:  # each episode draws other first goals: nothing to copy back
+        if self._goalless.any():  # each episode draws other first goals: nothing to copy back
             self._start_afresh(pose, rng)
             return
         if self._start is not None and self._start[0] == start:
@@ -182,11 +182,10 @@ class Movers:
         F[:, V0], F[:, V1] = F[:, INIT_V0], F[:, INIT_V1]
         I[:, STOPPED] = I[:, PLANNED] = 0
         # A goalless wanderer starts as if it had arrived, so it draws a goal before anything plans.
-        I[:, ARRIVED] = (I[:, WANDER] == 1) & (I[:, ROUTE_LENGTH] == 0)
+        I[:, ARRIVED] = self._goalless
         t.goals[:] = t.routes
         I[:, HEAD], I[:, TAIL] = 0, np.maximum(I[:, ROUTE_LENGTH], 1)
-        if self._goalless:
-            draw_wanderers(F, I, t.goals, rng)
+        draw_wanderers(F, I, t.goals, rng)  # the goalless wanderers' first goals, if any
         t.orca_velocity[:] = 0.0
         t.objects[:] = self._initial_objects
         self._wanderer_arrived = False
