@@ -267,7 +267,14 @@ class AStar:
         # The lattice checked the footprint into the goal cell's centre, not along a last step
         # bent towards the exact goal: where that step (or the turn onto it) clips, end at the centre.
         if isinstance(grid, FootprintGrid):
-            heading = None if len(points) > 2 or math.isnan(yaw) else yaw
-            if not grid.path_free(points[-3:], heading):
+            if len(points) == 2:
+                drivable = grid.path_free(points, None if math.isnan(yaw) else yaw)
+            else:  # turning from the heading the lattice arrived with (from the start's cell, at the second point)
+                before = points[-3] if len(points) > 3 else (x0 + (s_c + 0.5) * grid.resolution,
+                                                              y0 + (s_r + 0.5) * grid.resolution)
+                (bx, by), (px, py) = before, points[-2]
+                drivable = (grid.turn_free(px, py, math.atan2(py - by, px - bx), math.atan2(gy - py, gx - px))
+                            and grid.segment_free(points[-2], points[-1]))
+            if not drivable:
                 points[-1] = centre
         return points
