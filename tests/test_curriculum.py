@@ -406,6 +406,9 @@ def test_zoo_style_schedules_and_action_noise():
     out = resolve_hyperparams({"learning_rate": "lin_1e-3", "action_noise": {"type": "normal", "sigma": 0.2}, "gamma": 0.98})
     assert out["learning_rate"](1.0) == pytest.approx(1e-3) and out["learning_rate"](0.25) == pytest.approx(2.5e-4)
     assert isinstance(out["action_noise"], NormalActionNoise) and out["gamma"] == 0.98
+    np.testing.assert_array_equal(out["action_noise"]._sigma, [0.2, 0.2])  # the sigma asked for, per action
+    out = resolve_hyperparams({"action_noise": {"type": "ornstein_uhlenbeck", "sigma": 0.3}})
+    np.testing.assert_array_equal(out["action_noise"]._sigma, [0.3, 0.3])
 
 
 def test_policy_zip_is_the_checkpoint_of_the_best_validation(tmp_path, monkeypatch):

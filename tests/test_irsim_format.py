@@ -329,10 +329,17 @@ def test_the_read_cache_follows_drawn_shapes_and_stays_bounded(monkeypatch):
 
 
 def test_random_robot_uses_world_margins(tmp_path):
-    scenario = load(tmp_path, ROBOT + "  distribution: {name: random}\nworld: {width: 4, height: 3, offset: [10, 20]}\n")
-    x, y, theta = scenario.start
-    assert 10.5 <= x <= 13.5 and 20.5 <= y <= 22.5 and -math.pi <= theta <= math.pi
+    # IR-SIM draws within 0.5 m of the world's edges: 200 draws stay inside and come near both ends.
+    text = ROBOT + "  distribution: {name: random}\nworld: {width: 4, height: 3, offset: [10, 20]}\n"
+    starts = np.array([load(tmp_path, text, seed=seed).start for seed in range(200)])
+    x, y, theta = starts.T
+    assert 10.5 <= x.min() < 10.6 and 13.4 < x.max() <= 13.5 and 20.5 <= y.min() < 20.6 and 22.4 < y.max() <= 22.5
+    assert np.all(np.abs(theta) <= math.pi)
+    scenario = load(tmp_path, text)
     assert scenario.goal != scenario.start[:2]
+    # A circle placement's default radius keeps the same margin: 3 / 2 - 0.5 about the world's centre.
+    circle = load(tmp_path, ROBOT + "  distribution: {name: circle}\nworld: {width: 4, height: 3, offset: [10, 20]}\n")
+    assert circle.start[:2] == pytest.approx((13.0, 21.5))
 
 
 def test_circle_distribution(tmp_path):

@@ -269,8 +269,12 @@ def test_check_rejects_goal_inside_obstacle_and_start_outside_world():
 
 
 def test_box_corners_follow_yaw():
-    box = BoxObstacle(x=0, y=0, length=2, width=1, yaw=math.pi / 2)
-    np.testing.assert_allclose(np.sort(box.corners()[:, 0]), [-0.5, -0.5, 0.5, 0.5], atol=1e-12)
+    # A yaw with no symmetry, so turning the wrong way shows: the corner ahead-left first, counter-clockwise.
+    yaw = 0.3
+    box = BoxObstacle(x=1.0, y=2.0, length=2, width=1, yaw=yaw)
+    c, s = math.cos(yaw), math.sin(yaw)
+    expected = [(1.0 + u * c - v * s, 2.0 + u * s + v * c) for u, v in ((1, 0.5), (-1, 0.5), (-1, -0.5), (1, -0.5))]
+    np.testing.assert_allclose(box.corners(), expected, atol=1e-12)
 
 
 def test_box_corner_table_is_the_rotation_formula_to_the_last_bit_and_counter_clockwise():
