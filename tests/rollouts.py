@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 
 
-def rollout(env, seed: int, steps: int = 200) -> list:
-    """Observations, rewards and episode ends of ``steps`` seeded random actions (resetting as episodes end)."""
+def rollout(env, seed: int, steps: int = 200, action_seed: int | None = None) -> list:
+    """Observations, rewards and episode ends of ``steps`` random actions (seeded by ``action_seed``,
+    else ``seed``) from ``reset(seed=seed)``, resetting as episodes end."""
     observation, _ = env.reset(seed=seed)
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(seed if action_seed is None else action_seed)
     trace = [observation]
     for _ in range(steps):
         observation, reward, terminated, truncated, _ = env.step(rng.uniform(-1, 1, 2).astype(np.float32))

@@ -18,6 +18,8 @@ NOT_TWO_NUMBERS = [
     [1 + 0j, 0.0], np.array([0.5 + 1j, 0.0]),
     [1.0, [2.0, 3.0]], {0: 0.5, 1: 1.0}, None, 0.5,
     [10**400, 0.0],  # an integer beyond any float
+    # Non-finite floats in the arrays a policy gives (the fast path): a NaN let through corrupts the pose.
+    np.array([np.nan, 0.0], dtype=np.float32), np.array([np.inf, 0.0]), np.array([0.0, -np.inf], dtype=np.float32),
 ]
 TWO_NUMBERS = [
     (np.array([0.0, 1.0], dtype=np.float32), (0.5, 1.0)),
