@@ -172,26 +172,42 @@ def segment_box_gap(ax: float, ay: float, bx: float, by: float, cx: float, cy: f
     return gap
 
 
+@register_jitable
+def _axes_separation(ax: float, ay: float, ac: float, as_: float, a_half_length: float, a_half_width: float,
+                     bx: float, by: float, bc: float, bs: float, b_half_length: float, b_half_width: float) -> float:
+    """How far apart the boxes lie along the more separating of box a's two axes."""
+    separation = -math.inf
+    for ux, uy, half in ((ac, as_, a_half_length), (-as_, ac, a_half_width)):
+        centre = (bx - ax) * ux + (by - ay) * uy
+        reach = abs(b_half_length * (bc * ux + bs * uy)) + abs(b_half_width * (-bs * ux + bc * uy))
+        separation = max(separation, abs(centre) - (half + reach))
+    return separation
+
+
+@register_jitable
+def boxes_separation(ax: float, ay: float, ac: float, as_: float, a_half_length: float, a_half_width: float,
+                     bx: float, by: float, bc: float, bs: float, b_half_length: float, b_half_width: float) -> float:
+    """The separating-axis test of two boxes (centre, yaw cosine and sine, half sides each): the
+    largest gap along any of their four side normals, positive where the boxes are apart (a lower
+    bound of their distance), else minus the depth of their overlap."""
+    return max(_axes_separation(ax, ay, ac, as_, a_half_length, a_half_width, bx, by, bc, bs, b_half_length, b_half_width),
+               _axes_separation(bx, by, bc, bs, b_half_length, b_half_width, ax, ay, ac, as_, a_half_length, a_half_width))
+
+
 def box_gap(a: Sequence[float], b: Sequence[float]) -> float:
     """Signed distance between two boxes, each (x, y, yaw, length, width): the gap between them,
     or where they overlap minus its depth (the least shift along a side's normal that parts them),
     as a circle's gap is its centre distance less both radii."""
     ax, ay, a_yaw, a_length, a_width = a
     bx, by, b_yaw, b_length, b_width = b
-    separation = -math.inf  # the separating-axis test over the four sides' normals
-    for yaw in (a_yaw, a_yaw + 0.5 * math.pi, b_yaw, b_yaw + 0.5 * math.pi):
-        nx, ny = math.cos(yaw), math.sin(yaw)
-        reach = sum(0.5 * length * abs(nx * math.cos(own) + ny * math.sin(own))
-                    + 0.5 * width * abs(-nx * math.sin(own) + ny * math.cos(own))
-                    for own, length, width in ((a_yaw, a_length, a_width), (b_yaw, b_length, b_width)))
-        separation = max(separation, abs(nx * (bx - ax) + ny * (by - ay)) - reach)
+    ac, as_, bc, bs = math.cos(a_yaw), math.sin(a_yaw), math.cos(b_yaw), math.sin(b_yaw)
+    halves_a, halves_b = (0.5 * a_length, 0.5 * a_width), (0.5 * b_length, 0.5 * b_width)
+    separation = boxes_separation(ax, ay, ac, as_, *halves_a, bx, by, bc, bs, *halves_b)
     if separation <= 0.0:
         return separation
     # Apart, the nearest pair of points has an edge of a in it (a corner of one, or a side against a corner).
     corners = box_corners(ax, ay, a_length, a_width, a_yaw)
-    c, s = math.cos(b_yaw), math.sin(b_yaw)
-    return min(segment_box_gap(*corners[k - 1], *corners[k], bx, by, c, s, 0.5 * b_length, 0.5 * b_width)
-               for k in range(4))
+    return min(segment_box_gap(*corners[k - 1], *corners[k], bx, by, bc, bs, *halves_b) for k in range(4))
 
 
 @register_jitable

@@ -55,17 +55,17 @@ def mover_fault(pose: tuple[float, float, float], motion: tuple[float, float, fl
     x, y, yaw = pose
     v, lateral, w = motion
     c, s = math.cos(yaw), math.sin(yaw)
-    cx, cy = x + robot.footprint_offset * c, y + robot.footprint_offset * s  # the footprint's centre
-    du, dv = c * (mover[0] - cx) + s * (mover[1] - cy), -s * (mover[0] - cx) + c * (mover[1] - cy)  # robot frame
-    if robot.shape == "box":
-        du, dv = min(max(du, -0.5 * robot.length), 0.5 * robot.length), min(max(dv, -0.5 * robot.width), 0.5 * robot.width)
-    else:
-        scale = robot.radius / (math.hypot(du, dv) or math.inf)
-        du, dv = du * scale, dv * scale
-    px, py = cx + c * du - s * dv, cy + s * du + c * dv
+    px, py = x + robot.footprint_offset * c, y + robot.footprint_offset * s  # the footprint's centre
+    # A box is judged at its point nearest the mover's centre (where that lies outside it); a circle
+    # at its centre, as turning moves no point of a circle's outline towards or away from anything.
+    half_length, half_width = 0.5 * robot.length, 0.5 * robot.width
+    du, dv = c * (mover[0] - px) + s * (mover[1] - py), -s * (mover[0] - px) + c * (mover[1] - py)  # robot frame
+    if robot.shape == "box" and (abs(du) > half_length or abs(dv) > half_width):
+        du, dv = min(max(du, -half_length), half_length), min(max(dv, -half_width), half_width)
+        px, py = px + c * du - s * dv, py + s * du + c * dv
     dx, dy = mover[0] - px, mover[1] - py
     distance = math.hypot(dx, dy)
-    if distance < 1e-9:  # the mover's centre on the robot's outline or inside it: no direction between them
+    if distance < 1e-9:  # the two centres together: no direction between them
         return "robot" if math.hypot(v, lateral) >= math.hypot(mover[3], mover[4]) else "mover"
     vx = v * c - lateral * s - w * (py - y)  # the point's velocity: the robot's, turning about its pose
     vy = v * s + lateral * c + w * (px - x)

@@ -316,8 +316,8 @@ class World:
             return None
         if len(rows) < len(touched):
             return Contact("static", -1, "robot")
-        # Judged by the speed the robot was driven at this period, as flatland judges it: at the
-        # contact itself the body has already been stopped, or pushed back, by what it met.
+        # Judged by the speed and turn the robot was driven at this period, as flatland judges it:
+        # at the contact itself the body has already been stopped, or pushed back, by what it met.
         v, w = self._driving
         return Contact("mover", rows[0], mover_fault(self.pose(), (v, 0.0, w), self.movers.states().rows[rows[0]],
                                                      self.scenario.robot))

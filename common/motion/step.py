@@ -20,7 +20,7 @@ import math
 import numpy as np
 from numba.extending import register_jitable
 
-from common.geometry import box_distance, point_in_polygon, segment_box_gap, segment_distance
+from common.geometry import box_distance, boxes_separation, point_in_polygon, segment_box_gap, segment_distance
 from common.irsim_geometry import centroid
 from common.kernel_cache import kernel, uncounted
 from common.kinematics import unicycle_euler
@@ -386,8 +386,7 @@ def _touches_static(shape, x, y, theta, r, length, width, circles, boxes, segmen
     for k in range(boxes.shape[0]):
         bx, by, bc, bs, bhl, bhw = boxes[k, 0], boxes[k, 1], boxes[k, 2], boxes[k, 3], boxes[k, 4], boxes[k, 5]
         if shape == BOX:
-            if not (_box_axes_separate(x, y, c, s, hl, hw, bx, by, bc, bs, bhl, bhw)
-                    or _box_axes_separate(bx, by, bc, bs, bhl, bhw, x, y, c, s, hl, hw)):
+            if boxes_separation(x, y, c, s, hl, hw, bx, by, bc, bs, bhl, bhw) <= 0.0:
                 return True
         elif box_distance(x, y, bx, by, 2.0 * bhl, 2.0 * bhw, bc, bs) <= r:
             return True
@@ -405,23 +404,11 @@ def _touches_static(shape, x, y, theta, r, length, width, circles, boxes, segmen
 
 
 @uncounted
-def _box_axes_separate(ax, ay, ac, as_, ahl, ahw, bx, by, bc, bs, bhl, bhw) -> bool:
-    """Whether one of box a's two axes separates it from box b."""
-    for ux, uy, half in ((ac, as_, ahl), (-as_, ac, ahw)):
-        centre = (bx - ax) * ux + (by - ay) * uy
-        reach = abs(bhl * (bc * ux + bs * uy)) + abs(bhw * (-bs * ux + bc * uy))
-        if abs(centre) > half + reach:
-            return True
-    return False
-
-
-@uncounted
 def bodies_touch(shape_a, xa, ya, ta, ra, la, wa, shape_b, xb, yb, tb, rb, lb, wb) -> bool:
     """Whether two bodies (a circle of radius r, or a box of length l and width w at heading t) touch."""
     if shape_a == BOX and shape_b == BOX:
         ca, sa, cb, sb = math.cos(ta), math.sin(ta), math.cos(tb), math.sin(tb)
-        return not (_box_axes_separate(xa, ya, ca, sa, 0.5 * la, 0.5 * wa, xb, yb, cb, sb, 0.5 * lb, 0.5 * wb)
-                    or _box_axes_separate(xb, yb, cb, sb, 0.5 * lb, 0.5 * wb, xa, ya, ca, sa, 0.5 * la, 0.5 * wa))
+        return boxes_separation(xa, ya, ca, sa, 0.5 * la, 0.5 * wa, xb, yb, cb, sb, 0.5 * lb, 0.5 * wb) <= 0.0
     if shape_a == BOX:
         return box_distance(xb, yb, xa, ya, la, wa, math.cos(ta), math.sin(ta)) <= rb
     if shape_b == BOX:

@@ -260,21 +260,19 @@ class AStar:
         if cells.size == 1:  # start and goal share a cell
             return np.array([[sx, sy], [gx, gy]])
         x0, y0 = grid.origin
-        points = np.column_stack([x0 + (cells % cols + 0.5) * grid.resolution, y0 + (cells // cols + 0.5) * grid.resolution])
+        centres = np.column_stack([x0 + (cells % cols + 0.5) * grid.resolution, y0 + (cells // cols + 0.5) * grid.resolution])
+        points = centres.copy()
         points[0] = sx, sy
-        centre = points[-1].copy()
         points[-1] = gx, gy
-        # The lattice checked the footprint into the goal cell's centre, not along a last step
-        # bent towards the exact goal: where that step (or the turn onto it) clips, end at the centre.
+        # The lattice checked the footprint into the goal cell's centre, not along a last step bent
+        # towards the exact goal: where that step, or the turn onto it from the heading the robot
+        # arrives with (the lattice's step between cell centres; at the start, its own), clips,
+        # the path ends at the centre.
         if isinstance(grid, FootprintGrid):
-            if len(points) == 2:
-                drivable = grid.path_free(points, None if math.isnan(yaw) else yaw)
-            else:  # turning from the heading the lattice arrived with (from the start's cell, at the second point)
-                before = points[-3] if len(points) > 3 else (x0 + (s_c + 0.5) * grid.resolution,
-                                                              y0 + (s_r + 0.5) * grid.resolution)
-                (bx, by), (px, py) = before, points[-2]
-                drivable = (grid.turn_free(px, py, math.atan2(py - by, px - bx), math.atan2(gy - py, gx - px))
-                            and grid.segment_free(points[-2], points[-1]))
-            if not drivable:
-                points[-1] = centre
+            arriving = yaw
+            if len(cells) > 2:
+                dx, dy = centres[-2] - centres[-3]
+                arriving = math.atan2(dy, dx)
+            if not grid.path_free(points[-2:], arriving):
+                points[-1] = centres[-1]
         return points
