@@ -175,22 +175,30 @@ def segment_box_gap(ax: float, ay: float, bx: float, by: float, cx: float, cy: f
 @register_jitable
 def _axes_separation(ax: float, ay: float, ac: float, as_: float, a_half_length: float, a_half_width: float,
                      bx: float, by: float, bc: float, bs: float, b_half_length: float, b_half_width: float) -> float:
-    """How far apart the boxes lie along the more separating of box a's two axes."""
+    """How far apart the boxes lie along box a's two axes: the first positive gap (they are apart),
+    else the larger of the two (minus how deep they overlap along it)."""
     separation = -math.inf
     for ux, uy, half in ((ac, as_, a_half_length), (-as_, ac, a_half_width)):
         centre = (bx - ax) * ux + (by - ay) * uy
         reach = abs(b_half_length * (bc * ux + bs * uy)) + abs(b_half_width * (-bs * ux + bc * uy))
-        separation = max(separation, abs(centre) - (half + reach))
+        gap = abs(centre) - (half + reach)
+        if gap > 0.0:  # one separating axis settles it: contact tests run this on every step
+            return gap
+        separation = max(separation, gap)
     return separation
 
 
 @register_jitable
 def boxes_separation(ax: float, ay: float, ac: float, as_: float, a_half_length: float, a_half_width: float,
                      bx: float, by: float, bc: float, bs: float, b_half_length: float, b_half_width: float) -> float:
-    """The separating-axis test of two boxes (centre, yaw cosine and sine, half sides each): the
-    largest gap along any of their four side normals, positive where the boxes are apart (a lower
-    bound of their distance), else minus the depth of their overlap."""
-    return max(_axes_separation(ax, ay, ac, as_, a_half_length, a_half_width, bx, by, bc, bs, b_half_length, b_half_width),
+    """The separating-axis test of two boxes (centre, yaw cosine and sine, half sides each):
+    positive where the boxes are apart (the gap along a side normal that parts them, a lower bound
+    of their distance), else minus the depth of their overlap (the least shift along any of their
+    four side normals that parts them)."""
+    separation = _axes_separation(ax, ay, ac, as_, a_half_length, a_half_width, bx, by, bc, bs, b_half_length, b_half_width)
+    if separation > 0.0:
+        return separation
+    return max(separation,
                _axes_separation(bx, by, bc, bs, b_half_length, b_half_width, ax, ay, ac, as_, a_half_length, a_half_width))
 
 
