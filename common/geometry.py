@@ -18,6 +18,27 @@ from common.kernel_cache import kernel, uncounted
 from common.polygons import orientation
 
 
+@uncounted
+def hypot_excess(dx: float, dy: float, reach: float) -> float:
+    """A number with the sign of ``hypot(dx, dy) - reach`` (``reach`` ≥ 0): decided by squares,
+    a few times cheaper, unless the two are within rounding of each other, where it is that
+    difference itself, so a comparison with it gives hypot's answer to the last bit."""
+    squared, limit = dx * dx + dy * dy, reach * reach
+    if squared > limit * (1.0 + 1e-9):
+        return 1.0
+    if squared < limit * (1.0 - 1e-9):
+        return -1.0
+    return math.hypot(dx, dy) - reach
+
+
+@uncounted
+def beyond_segment_bounds(x: float, y: float, x1: float, y1: float, x2: float, y2: float, reach: float) -> bool:
+    """Whether the point (x, y) lies further than ``reach`` outside the bounding box of the segment
+    (x1, y1)-(x2, y2) along an axis, so further than ``reach`` from the segment: a test of four
+    comparisons that spares most distance computations where most segments are far."""
+    return min(x1, x2) - x > reach or x - max(x1, x2) > reach or min(y1, y2) - y > reach or y - max(y1, y2) > reach
+
+
 @kernel
 def circle_distance(px: float, py: float, cx: float, cy: float, radius: float) -> float:
     """Signed distance from the point (px, py) to a circle."""

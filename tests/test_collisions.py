@@ -160,6 +160,51 @@ def test_segment_gaps_to_boxes_and_segments_match_sampled_distances():
     assert segments_gap(-1.0, 0.0, 1.0, 0.0, 0.0, -1.0, 0.0, 1.0) == 0.0
 
 
+def test_hypot_excess_compares_with_a_reach_as_hypot_does_to_the_last_bit():
+    """Decided by squares away from the edge; at the edge (a reach a few ulps either side of the
+    distance, where the squares' rounding and hypot's disagree) hypot's own answer."""
+    from common.geometry import hypot_excess
+
+    rng = np.random.default_rng(0)
+    checked = 0
+    for dx, dy in rng.uniform(-20, 20, (3000, 2)):
+        distance = math.hypot(dx, dy)
+        reaches = [distance * (1 + f) for f in (-0.1, -1e-8, -1e-10, 1e-10, 1e-8, 0.1)]
+        reach = distance
+        for _ in range(4):
+            reaches += [reach]
+            reach = np.nextafter(reach, np.inf)
+        reach = distance
+        for _ in range(4):
+            reach = np.nextafter(reach, -np.inf)
+            reaches += [reach]
+        for reach in reaches:
+            assert np.sign(hypot_excess(dx, dy, reach)) == np.sign(distance - reach), (dx, dy, reach)
+            checked += 1
+    assert checked == 3000 * 14
+
+
+def test_a_point_beyond_a_segments_bounds_is_beyond_the_segment_and_one_within_is_not_passed_over():
+    from common.geometry import beyond_segment_bounds, segment_distance
+
+    rng = np.random.default_rng(1)
+    passed_over = 0
+    for x, y, x1, y1, x2, y2, reach in rng.uniform([-5, -5, -3, -3, -3, -3, 0], [5, 5, 3, 3, 3, 3, 2], (5000, 7)):
+        distance = segment_distance(x, y, x1, y1, x2, y2)
+        if beyond_segment_bounds(x, y, x1, y1, x2, y2, reach):
+            assert distance > reach
+            passed_over += 1
+        if distance <= reach:
+            assert not beyond_segment_bounds(x, y, x1, y1, x2, y2, reach)
+    assert 1000 < passed_over < 5000  # the test spares many, and is not everything
+    # 0.5 m from an axis-aligned wall: beyond 0.49 m, not beyond 0.5 m; off its end diagonally, a
+    # bounding box test cannot tell (it only ever errs toward computing the distance).
+    for x, y in ((-0.5, 0.0), (10.5, 0.0), (5.0, 0.5), (5.0, -0.5)):
+        assert not beyond_segment_bounds(x, y, 0.0, 0.0, 10.0, 0.0, 0.5)
+        assert beyond_segment_bounds(x, y, 0.0, 0.0, 10.0, 0.0, 0.49)
+    assert not beyond_segment_bounds(-0.3, 0.4, 0.0, 0.0, 10.0, 0.0, 0.49)
+
+
 @pytest.mark.parametrize(("a", "b", "gap"), [
     ((0.0, 0.0, 0.0, 1.0, 1.0), (1.5, 0.0, 0.0, 1.0, 1.0), 0.5),  # side by side
     ((0.0, 0.0, 0.0, 1.0, 1.0), (0.5 + 0.3 + math.sqrt(0.5), 0.0, math.pi / 4, 1.0, 1.0), 0.3),  # a corner at a side

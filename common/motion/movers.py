@@ -108,6 +108,7 @@ class Movers:
         # Wanderers given a region and no goals: each episode's first goal is drawn at reset, as
         # IR-SIM draws a wanderer's first at its start.
         self._goalless = (I[:, WANDER] == 1) & (I[:, ROUTE_LENGTH] == 0)
+        self._draws_first_goals = bool(self._goalless.any())
         self._wanderer_arrived = False
         self._start: tuple[tuple[float, ...], list[np.ndarray]] | None = None  # the last start and its state
         self._neighbors = np.zeros((len(t.objects) + len(t.F), 5))
@@ -156,7 +157,7 @@ class Movers:
         ``pose``, at rest; the groups' plans for the first step. A wanderer without goals draws
         its first from ``rng``."""
         start = tuple(pose)
-        if self._goalless.any():  # each episode draws other first goals: nothing to copy back
+        if self._draws_first_goals:  # each episode draws other first goals: nothing to copy back
             self._start_afresh(pose, rng)
             return
         if self._start is not None and self._start[0] == start:
@@ -170,10 +171,10 @@ class Movers:
         self._start = (start, [array.copy() for array in self._episode_state()])
 
     def _episode_state(self) -> tuple[np.ndarray, ...]:
-        """Every array an episode changes."""
-        t = self.table
-        return (t.F, t.I, t.goals, t.objects, t.orca_velocity, self._states, self._circle_rows, self._box_rows,
-                self._robot)
+        """The arrays that hold every value an episode changes: the two packed buffers (the rest
+        of them, the scenario's constants and scratch, comes back unchanged) and ORCA's velocities."""
+        floats, _, ints = self._packed[:3]
+        return floats, ints, self.table.orca_velocity
 
     def _start_afresh(self, pose: tuple[float, float, float], rng: np.random.Generator) -> None:
         t = self.table

@@ -17,6 +17,7 @@ import math
 
 import numpy as np
 
+from common.geometry import beyond_segment_bounds
 from common.kernel_cache import uncounted
 from common.motion.steering import c_pow
 
@@ -101,9 +102,12 @@ def _obstacle_force(x: float, y: float, radius: float, segments: np.ndarray, p: 
     fx = fy = 0.0
     sigma = p[SIGMA_OBSTACLE]
     cutoff = 5.0 * sigma + radius
+    reach = cutoff + 1e-9  # a margin for rounding
     for k in range(segments.shape[0]):
-        x1, y1 = segments[k, 0], segments[k, 1]
-        ex, ey = segments[k, 2] - x1, segments[k, 3] - y1
+        x1, y1, x2, y2 = segments[k, 0], segments[k, 1], segments[k, 2], segments[k, 3]
+        if beyond_segment_bounds(x, y, x1, y1, x2, y2, reach):
+            continue
+        ex, ey = x2 - x1, y2 - y1
         l2 = ex * ex + ey * ey
         if l2 < 1e-12:
             cx, cy = x1, y1

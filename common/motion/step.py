@@ -20,7 +20,10 @@ import math
 import numpy as np
 from numba.extending import register_jitable
 
-from common.geometry import box_distance, boxes_separation, point_in_polygon, segment_box_gap, segment_distance
+from common.geometry import (
+    beyond_segment_bounds, box_distance, boxes_separation, hypot_excess, point_in_polygon, segment_box_gap,
+    segment_distance,
+)
 from common.irsim_geometry import centroid
 from common.kernel_cache import kernel, uncounted
 from common.kinematics import unicycle_euler
@@ -376,23 +379,29 @@ def advance(F, I, params, goals, routes, objects, segments, outlines, irsim, dt,
 def _touches_static(shape, x, y, theta, r, length, width, circles, boxes, segments, rings, ring_index) -> bool:
     """Whether a body (a circle of radius r, or a box of length and width at heading theta) touches
     the static geometry (see :func:`common.motion.table.static_contacts`)."""
-    c, s, hl, hw = math.cos(theta), math.sin(theta), 0.5 * length, 0.5 * width
+    box = shape == BOX
+    c, s = (math.cos(theta), math.sin(theta)) if box else (1.0, 0.0)  # a circle's heading is never read
+    hl, hw = 0.5 * length, 0.5 * width
     for k in range(circles.shape[0]):
-        if shape == BOX:
+        if box:
             if box_distance(circles[k, 0], circles[k, 1], x, y, length, width, c, s) <= circles[k, 2]:
                 return True
-        elif math.hypot(x - circles[k, 0], y - circles[k, 1]) <= r + circles[k, 2]:
+        elif hypot_excess(x - circles[k, 0], y - circles[k, 1], r + circles[k, 2]) <= 0.0:
             return True
     for k in range(boxes.shape[0]):
         bx, by, bc, bs, bhl, bhw = boxes[k, 0], boxes[k, 1], boxes[k, 2], boxes[k, 3], boxes[k, 4], boxes[k, 5]
-        if shape == BOX:
+        if box:
             if boxes_separation(x, y, c, s, hl, hw, bx, by, bc, bs, bhl, bhw) <= 0.0:
                 return True
         elif box_distance(x, y, bx, by, 2.0 * bhl, 2.0 * bhw, bc, bs) <= r:
             return True
+    reach = r + 1e-9  # the body's bounding circle (a box's half diagonal), and a margin for rounding
     for k in range(segments.shape[0]):
         x1, y1, x2, y2 = segments[k, 0], segments[k, 1], segments[k, 2], segments[k, 3]
-        gap = segment_box_gap(x1, y1, x2, y2, x, y, c, s, hl, hw) if shape == BOX else segment_distance(x, y, x1, y1,
+        # A crowd's people stand clear of most walls most steps.
+        if beyond_segment_bounds(x, y, x1, y1, x2, y2, reach):
+            continue
+        gap = segment_box_gap(x1, y1, x2, y2, x, y, c, s, hl, hw) if box else segment_distance(x, y, x1, y1,
                                                                                                        x2, y2) - r
         if gap <= 0.0:
             return True
@@ -413,7 +422,7 @@ def bodies_touch(shape_a, xa, ya, ta, ra, la, wa, shape_b, xb, yb, tb, rb, lb, w
         return box_distance(xb, yb, xa, ya, la, wa, math.cos(ta), math.sin(ta)) <= rb
     if shape_b == BOX:
         return box_distance(xa, ya, xb, yb, lb, wb, math.cos(tb), math.sin(tb)) <= ra
-    return math.hypot(xa - xb, ya - yb) <= ra + rb
+    return hypot_excess(xa - xb, ya - yb, ra + rb) <= 0.0
 
 
 @uncounted
@@ -438,7 +447,7 @@ def settle(F, I, goals, robot, mode, circles, boxes, segments, rings, ring_index
     for m in range(n):
         I[m, PLANNED] = 0
         head = I[m, HEAD]
-        if math.hypot(F[m, X] - goals[m, head, 0], F[m, Y] - goals[m, head, 1]) < F[m, GOAL_THRESHOLD]:
+        if hypot_excess(F[m, X] - goals[m, head, 0], F[m, Y] - goals[m, head, 1], F[m, GOAL_THRESHOLD]) < 0.0:
             if I[m, TAIL] - head == 1:
                 I[m, ARRIVED] = 1
             else:
