@@ -15,6 +15,8 @@ who moved into whom (``robot`` or ``mover``: who closed in faster; see :class:`c
 from __future__ import annotations
 
 import contextlib
+import dataclasses
+import itertools
 import math
 import multiprocessing
 import os
@@ -22,7 +24,7 @@ import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
-from typing import Callable, Iterable, Protocol, Sequence
+from typing import Callable, Iterable, Iterator, Protocol, Sequence
 
 import numpy as np
 from scipy import stats
@@ -293,6 +295,11 @@ def summarise(agent: str, episodes: Sequence[Episode]) -> Summary:
     )
 
 
+EVALUATION_BLOCK = 1000
+"""Scenarios :func:`evaluate` resolves and plans at a time: a scenario holds tens of kB, so a
+million-episode evaluation held at once would need tens of GB before its first episode."""
+
+
 def evaluate(
     agents: Sequence[Agent],
     scenarios: Iterable[Scenario],
@@ -307,33 +314,53 @@ def evaluate(
     """Every agent on the same scenarios with the same seeds (episode i uses ``seed + i``) under the
     same ``conditions``, judged within ``goal_radius`` (default each scenario's own); one summary
     per agent, in order. ``max_steps`` defaults to each agent's own (see :func:`episode_limit`).
+    ``scenarios`` is read :data:`EVALUATION_BLOCK` at a time, so a lazy iterable keeps only a
+    block of them in memory.
 
     ``jobs`` > 1 runs the episodes in up to that many worker processes, one per core at most (see
     :func:`_in_processes`), with the same figures, provided each agent pickles (a policy opened
     from a file does) and its ``reset`` forgets everything of the episode before, as an agent
     must anyway; ``progress`` then hears of a chunk of episodes at a time."""
     resolved = (conditions or Conditions()).for_tier(tier)
-    scenarios = [resolved.scenario(s) for s in scenarios]
-    shortest = [shortest_path_length(s, goal_radius) for s in scenarios]
-    batch = _Batch(scenarios, shortest, tier, seed, max_steps, resolved, goal_radius)
     workers = min(jobs, os.cpu_count() or 1)
-    if workers > 1 and len(agents) * len(scenarios) > 1:
-        rows = _in_processes(list(agents), batch, workers, progress)
-    else:
-        rows = []
-        for agent in agents:
-            episodes = []
-            for i in range(len(scenarios)):
-                episodes += batch.run(agent, i, i + 1)
-                if progress:
-                    progress(1)
-            rows.append(episodes)
+    rows: list[list[Episode]] = [[] for _ in agents]
+    with contextlib.ExitStack() as stack:
+        pool = None
+        for first, block in _blocks(scenarios, EVALUATION_BLOCK):
+            block = [resolved.scenario(s) for s in block]
+            batch = _Batch(block, [shortest_path_length(s, goal_radius) for s in block], tier, seed + first,
+                           max_steps, resolved, goal_radius)
+            if pool is None and workers > 1 and len(agents) * len(block) > 1:
+                pool = stack.enter_context(_worker_pool(list(agents), min(workers, len(agents) * len(block))))
+            if pool is not None:
+                episodes = _in_processes(pool, len(agents), batch, workers, progress)
+            else:
+                episodes = [_run_with_progress(agent, batch, progress) for agent in agents]
+            for row, more in zip(rows, episodes):
+                row += more
     return [summarise(agent.name, episodes) for agent, episodes in zip(agents, rows)]
+
+
+def _blocks(items: Iterable, size: int) -> Iterator[tuple[int, list]]:
+    """``items`` in lists of ``size`` (the last shorter), each with the index of its first item."""
+    iterator, first = iter(items), 0
+    while block := list(itertools.islice(iterator, size)):
+        yield first, block
+        first += len(block)
+
+
+def _run_with_progress(agent: Agent, batch: "_Batch", progress: Callable[[int], None] | None) -> list[Episode]:
+    episodes = []
+    for i in range(len(batch.scenarios)):
+        episodes += batch.run(agent, i, i + 1)
+        if progress:
+            progress(1)
+    return episodes
 
 
 @dataclass(frozen=True)
 class _Batch:
-    """The episodes every agent drives in one :func:`evaluate`: scenario i with seed ``seed + i``."""
+    """A block of the episodes every agent drives in one :func:`evaluate`: scenario i with seed ``seed + i``."""
 
     scenarios: list[Scenario]
     shortest: list[float]
@@ -349,45 +376,56 @@ class _Batch:
                             shortest=self.shortest[i], conditions=self.conditions, goal_radius=self.goal_radius)
                 for i in range(start, stop)]
 
+    def part(self, start: int, stop: int) -> "_Batch":
+        """Episodes ``start`` to ``stop`` alone (what a worker is sent), seeded as they are here."""
+        return dataclasses.replace(self, scenarios=self.scenarios[start:stop], shortest=self.shortest[start:stop],
+                                   seed=self.seed + start)
 
-_WORKER: dict[str, object] = {}  # a worker process's agents and episodes, unpickled once when it starts
+
+_WORKER: dict[str, object] = {}  # a worker process's agents, unpickled once when it starts
 
 
-def _start_worker(agents: list, batch: _Batch) -> None:
-    _WORKER["agents"], _WORKER["batch"] = agents, batch
+def _start_worker(agents: list) -> None:
+    _WORKER["agents"] = agents
     torch = sys.modules.get("torch")  # loaded by unpickling a policy
     if torch is not None:
         torch.set_num_threads(1)  # a worker per core: more threads each would only contend
 
 
-def _run_chunk(agent_index: int, start: int, stop: int) -> list[Episode]:
-    return _WORKER["batch"].run(_WORKER["agents"][agent_index], start, stop)
+def _run_chunk(agent_index: int, batch: _Batch) -> list[Episode]:
+    return batch.run(_WORKER["agents"][agent_index], 0, len(batch.scenarios))
 
 
-def _in_processes(agents: list, batch: _Batch, workers: int,
-                  progress: Callable[[int], None] | None) -> list[list[Episode]]:
-    """Each agent's episodes in chunks over ``workers`` fresh processes (``spawn``: no thread or
-    simulator state of this process is copied). Every episode builds its own world from its
-    scenario and seed, so it ends as it does in this process; the agents and the episodes are
-    sent once per worker (a policy opened from a file is opened again there, by its path)."""
-    count = len(batch.scenarios)
-    size = max(1, math.ceil(count * len(agents) / (4 * workers)))  # a few chunks per worker keep them all busy
-    chunks = [(a, start, min(start + size, count)) for a in range(len(agents)) for start in range(0, count, size)]
-    done: dict[tuple[int, int], list[Episode]] = {}
+@contextlib.contextmanager
+def _worker_pool(agents: list, workers: int) -> Iterator[ProcessPoolExecutor]:
+    """``workers`` fresh processes (``spawn``: no thread or simulator state of this process is
+    copied), each holding the agents (a policy opened from a file is opened again there, by its
+    path); the chunks not yet begun are dropped if the evaluation fails."""
     context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(min(workers, len(chunks)), mp_context=context, initializer=_start_worker,
-                             initargs=(agents, batch)) as pool:
-        futures = {pool.submit(_run_chunk, *chunk): chunk[:2] for chunk in chunks}
+    with ProcessPoolExecutor(workers, mp_context=context, initializer=_start_worker, initargs=(agents,)) as pool:
         try:
-            for future in as_completed(futures):
-                episodes = future.result()  # a worker's error (a ConfigError too) is raised here
-                done[futures[future]] = episodes
-                if progress:
-                    progress(len(episodes))
+            yield pool
         except BaseException:
-            pool.shutdown(wait=True, cancel_futures=True)  # the chunks not yet begun are dropped
+            pool.shutdown(wait=True, cancel_futures=True)
             raise
-    rows: list[list[Episode]] = [[] for _ in agents]
+
+
+def _in_processes(pool: ProcessPoolExecutor, agents: int, batch: _Batch, workers: int,
+                  progress: Callable[[int], None] | None) -> list[list[Episode]]:
+    """Each of the ``agents``' episodes of ``batch`` in chunks over the pool's processes, each
+    chunk sent with its own scenarios. Every episode builds its own world from its scenario and
+    seed, so it ends as it does in this process."""
+    count = len(batch.scenarios)
+    size = max(1, math.ceil(count * agents / (4 * workers)))  # a few chunks per worker keep them all busy
+    chunks = [(a, start, min(start + size, count)) for a in range(agents) for start in range(0, count, size)]
+    futures = {pool.submit(_run_chunk, a, batch.part(start, stop)): (a, start) for a, start, stop in chunks}
+    done: dict[tuple[int, int], list[Episode]] = {}
+    for future in as_completed(futures):
+        episodes = future.result()  # a worker's error (a ConfigError too) is raised here
+        done[futures[future]] = episodes
+        if progress:
+            progress(len(episodes))
+    rows: list[list[Episode]] = [[] for _ in range(agents)]
     for a, start, _ in chunks:
         rows[a] += done[(a, start)]
     return rows

@@ -529,9 +529,26 @@ def test_render_index_draws_that_scenario_alone(from_file, tmp_path):
     (tmp_path / "random.yaml").write_text(RANDOM_WORLD)
     source = {"suite": None, "scenario_file": str(tmp_path / "random.yaml")} if from_file else {"suite": "sparse", "scenario_file": None}
     args = argparse.Namespace(seed=7, world="flatland", episodes=None, **source)
-    all_five = _scenarios(args, count=5)
-    assert [_scenarios(args, count=1, first=k)[0] for k in range(5)] == all_five
+    all_five = list(_scenarios(args, count=5))
+    assert [_scenarios(args, count=1, first=k).first() for k in range(5)] == all_five
     assert len({s.model_dump_json() for s in all_five}) == 5, "the five draws must differ for the test to tell them apart"
+
+
+def test_an_evaluations_scenarios_are_drawn_as_they_are_read(monkeypatch):
+    """`eval --episodes 1000000` drew every scenario before its first episode (tens of GB)."""
+    import argparse
+    import itertools
+
+    import common.generators
+    from common.curriculum.cli import _scenarios
+
+    draws: list[int] = []
+    generate = common.generators.generate
+    monkeypatch.setattr(common.generators, "generate", lambda *a, **k: draws.append(1) or generate(*a, **k))
+    args = argparse.Namespace(seed=7, world="flatland", episodes=None, suite="sparse", scenario_file=None)
+    scenarios = _scenarios(args, count=1_000_000)
+    assert len(scenarios) == 1_000_000 and not draws
+    assert list(itertools.islice(scenarios, 2)) == list(_scenarios(args, count=2)) and len(draws) == 4
 
 
 def test_a_world_no_tier_can_build_is_refused_by_validate_and_named_where_it_is_driven(tmp_path, capsys):

@@ -117,14 +117,43 @@ def test_episodes_run_in_worker_processes_end_as_they_do_in_this_one():
     seen: list[int] = []
     here = evaluate(agents, scenarios, seed=100000, goal_radius=0.1)
     there = evaluate(agents, scenarios, seed=100000, goal_radius=0.1, jobs=2, progress=seen.append)
+    with pytest.MonkeyPatch.context() as patch:
+        # Read three scenarios at a time: blocks of 3, 3 and 1, each chunked anew over the workers.
+        patch.setattr("common.evaluation.EVALUATION_BLOCK", 3)
+        in_blocks_there = evaluate(agents, iter(scenarios), seed=100000, goal_radius=0.1, jobs=2)
+        in_blocks_here = evaluate(agents, iter(scenarios), seed=100000, goal_radius=0.1)
 
     def rows(summaries):
         return [(s.agent, [(e.agent, e.scenario, e.seed, e.outcome, e.steps, e.path_length) for e in s.rows])
                 for s in summaries]
 
-    assert rows(there) == rows(here)
+    assert rows(there) == rows(here) == rows(in_blocks_there) == rows(in_blocks_here)
     assert len({e.outcome for s in here for e in s.rows}) > 1  # episodes that end differently, so an offset shows
     assert sum(seen) == 14
+
+
+def test_an_evaluation_reads_its_scenarios_a_block_at_a_time(monkeypatch):
+    """A million episodes' scenarios held at once took tens of GB before the first episode: the
+    scenarios drawn stay within a block of the episodes driven."""
+    monkeypatch.setattr("common.evaluation.EVALUATION_BLOCK", 4)
+    driven: list[int] = []
+
+    class Counting(Scripted):
+        def reset(self) -> None:
+            driven.append(1)
+            super().reset()
+
+    ahead: list[int] = []
+
+    def drawn():
+        for i in range(10):
+            ahead.append(i - len(driven))  # how far the draws run ahead of the episodes
+            yield OPEN.model_copy(update={"name": f"open-{i}"})
+
+    (summary,) = evaluate([Counting("c", command=(0.5, 0.0))], drawn(), seed=3)
+    assert [e.scenario for e in summary.rows] == [f"open-{i}" for i in range(10)]
+    assert [e.seed for e in summary.rows] == list(range(3, 13))
+    assert max(ahead) <= 3 and len(driven) == 10
 
 
 class Refusing(Scripted):

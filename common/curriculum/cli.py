@@ -8,8 +8,9 @@ import math
 import sys
 import warnings
 from collections import Counter
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Iterator, Sequence
 
 import numpy as np
 
@@ -19,6 +20,7 @@ from common.task import MAX_EPISODES
 
 if TYPE_CHECKING:
     from common.conditions import Conditions
+    from common.scenario import Scenario
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports a command Ctrl-C stopped
@@ -143,7 +145,7 @@ def _eval(args: argparse.Namespace) -> int:
 
     agents = _distinct_names(_policies(args.policy), [str(path) for path in args.policy])
     _settle(args, agents)
-    _scenarios(args, count=1)  # a bad scenario file is refused before any episode
+    _scenarios(args, count=1).first()  # a bad scenario file is refused before any episode
     # Each policy runs episodes as long as, under the conditions and judged within the goal radius
     # it trained with, unless --max-steps, --env-kwargs and --goal-threshold say otherwise.
     summaries = []
@@ -236,11 +238,28 @@ def _scenarios(args: argparse.Namespace, count: int | None = None, conditions=No
     seed = args.seed + first
     if args.scenario_file:
         file = WorldFile(args.scenario_file)
-        scenarios = [file.scenario(seed + i) for i in range(count)]
-    else:
-        robot = conditions.for_tier(args.world, strict=False).profile if conditions is not None else None
-        scenarios = list(get_suite(args.suite).scenarios(count=count, seed=seed, robot=robot))
-    return scenarios
+        return Drawn(count, lambda: (file.scenario(seed + i) for i in range(count)))
+    robot = conditions.for_tier(args.world, strict=False).profile if conditions is not None else None
+    suite = get_suite(args.suite)
+    return Drawn(count, lambda: suite.scenarios(count=count, seed=seed, robot=robot))
+
+
+@dataclass(frozen=True)
+class Drawn:
+    """An evaluation's ``count`` scenarios, drawn as they are read: a million of them held at once
+    would take tens of GB (:data:`common.evaluation.EVALUATION_BLOCK`)."""
+
+    count: int
+    draw: Callable[[], Iterator[Scenario]]
+
+    def __len__(self) -> int:
+        return self.count
+
+    def __iter__(self) -> Iterator[Scenario]:
+        return iter(self.draw())
+
+    def first(self) -> Scenario:
+        return next(iter(self))
 
 
 def _settle(args: argparse.Namespace, agents) -> None:
@@ -261,10 +280,14 @@ def _counted(count: int, noun: str) -> str:
     return f"{count} {noun}" if count == 1 else f"{count} {noun}s"
 
 
-def _announce(args: argparse.Namespace, agents: list, scenarios: list, radius: float | None, conditions) -> None:
+def _announce(args: argparse.Namespace, agents: list, scenarios: Drawn | list, radius: float | None,
+              conditions) -> None:
     """Say on stderr what the agents are measured on, so a figure can be told apart and re-run;
-    a world the tier cannot build, or an agent that cannot drive its robot, is refused first, instead."""
-    _refuse_undrivable(agents, _as_driven(args, scenarios, conditions), radius)
+    a world the tier cannot build, or an agent that cannot drive its robot, is refused first,
+    instead. The first scenario stands for them all: a suite's or a file's share their robot,
+    sensors and kind of world, which is all either refusal reads."""
+    first = scenarios.first() if isinstance(scenarios, Drawn) else scenarios[0]
+    _refuse_undrivable(agents, _as_driven(args, [first], conditions), radius)
     resolved = conditions.for_tier(args.world)
     who = agents[0].name if len(agents) == 1 else _counted(len(agents), "agent")
     source = args.scenario_file or f"suite {args.suite}"
@@ -344,7 +367,8 @@ def _compare(args: argparse.Namespace) -> int:
 
     policies = _policies(args.policy)
     _settle(args, policies)
-    scenarios = _scenarios(args)  # a bad file is refused before the controllers and worlds load (seconds)
+    scenarios = _scenarios(args)
+    scenarios.first()  # a bad file is refused before the controllers and worlds load (seconds)
     controllers = _controllers(args.controllers, "--controllers")
     agents = _distinct_names(controllers + policies, [c.name for c in controllers] + [str(p) for p in args.policy or []])
 
@@ -372,7 +396,7 @@ def _compare(args: argparse.Namespace) -> int:
     atomic_write_all({out / "comparison.md": lambda tmp: tmp.write_text(table),
                       out / "episodes.csv": lambda tmp: write_csv(summaries, tmp),
                       out / "comparison.png": lambda tmp: bar_chart(summaries, tmp, title)})
-    gifs = [_record(agent, scenarios[0], args, Path(args.gif) / f"{_file_name(agent.name)}.gif", radius=radius)[0]
+    gifs = [_record(agent, scenarios.first(), args, Path(args.gif) / f"{_file_name(agent.name)}.gif", radius=radius)[0]
             for agent in agents] if args.gif else []
     if args.json:
         print(json.dumps({s.agent: s.to_json() for s in summaries}))
