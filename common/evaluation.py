@@ -15,7 +15,6 @@ who moved into whom (``robot`` or ``mover``: who closed in faster; see :class:`c
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import itertools
 import math
 import multiprocessing
@@ -296,13 +295,23 @@ def summarise(agent: str, episodes: Sequence[Episode]) -> Summary:
 
 
 EVALUATION_BLOCK = 1000
-"""Scenarios :func:`evaluate` resolves and plans at a time: a scenario holds tens of kB, so a
-million-episode evaluation held at once would need tens of GB before its first episode."""
+"""Scenarios :func:`evaluate` holds at a time (in each worker process, at most this many): a
+scenario holds tens of kB, so a million-episode evaluation held at once would need tens of GB
+before its first episode."""
+
+
+class ScenarioSource(Protocol):
+    """Scenarios drawn on demand: how many, and those from ``start`` to ``stop`` (exclusive), each
+    the same whenever drawn. A source that pickles lets worker processes draw their own."""
+
+    def __len__(self) -> int: ...
+
+    def part(self, start: int, stop: int) -> Iterable[Scenario]: ...
 
 
 def evaluate(
     agents: Sequence[Agent],
-    scenarios: Iterable[Scenario],
+    scenarios: Iterable[Scenario] | ScenarioSource,
     tier: str = "flatland",
     seed: int = 0,
     max_steps: int | None = None,
@@ -314,31 +323,56 @@ def evaluate(
     """Every agent on the same scenarios with the same seeds (episode i uses ``seed + i``) under the
     same ``conditions``, judged within ``goal_radius`` (default each scenario's own); one summary
     per agent, in order. ``max_steps`` defaults to each agent's own (see :func:`episode_limit`).
-    ``scenarios`` is read :data:`EVALUATION_BLOCK` at a time, so a lazy iterable keeps only a
-    block of them in memory.
+    At most :data:`EVALUATION_BLOCK` scenarios are held at a time when ``scenarios`` is a lazy
+    iterable (in this process) or a :class:`ScenarioSource` (in worker processes too).
 
     ``jobs`` > 1 runs the episodes in up to that many worker processes, one per core at most (see
     :func:`_in_processes`), with the same figures, provided each agent pickles (a policy opened
     from a file does) and its ``reset`` forgets everything of the episode before, as an agent
     must anyway; ``progress`` then hears of a chunk of episodes at a time."""
-    resolved = (conditions or Conditions()).for_tier(tier)
+    settings = _Settings(tier, seed, max_steps, (conditions or Conditions()).for_tier(tier), goal_radius)
     workers = min(jobs, os.cpu_count() or 1)
+    source = scenarios if hasattr(scenarios, "part") else None
+    if workers > 1:
+        source = list(scenarios) if source is None else source
+        if len(agents) * len(source) > 1:
+            rows = _in_processes(list(agents), source, settings, workers, progress)
+            return [summarise(agent.name, episodes) for agent, episodes in zip(agents, rows)]
     rows: list[list[Episode]] = [[] for _ in agents]
-    with contextlib.ExitStack() as stack:
-        pool = None
-        for first, block in _blocks(scenarios, EVALUATION_BLOCK):
-            block = [resolved.scenario(s) for s in block]
-            batch = _Batch(block, [shortest_path_length(s, goal_radius) for s in block], tier, seed + first,
-                           max_steps, resolved, goal_radius)
-            if pool is None and workers > 1 and len(agents) * len(block) > 1:
-                pool = stack.enter_context(_worker_pool(list(agents), min(workers, len(agents) * len(block))))
-            if pool is not None:
-                episodes = _in_processes(pool, len(agents), batch, workers, progress)
-            else:
-                episodes = [_run_with_progress(agent, batch, progress) for agent in agents]
-            for row, more in zip(rows, episodes):
-                row += more
+    for first, block in _blocks(scenarios if source is None else _part(source, 0, len(source)), EVALUATION_BLOCK):
+        for row, more in zip(rows, _drive(agents, block, first, settings, progress)):
+            row += more
     return [summarise(agent.name, episodes) for agent, episodes in zip(agents, rows)]
+
+
+@dataclass(frozen=True)
+class _Settings:
+    """What every episode of one :func:`evaluate` shares: episode i has seed ``seed + i``."""
+
+    tier: str
+    seed: int
+    max_steps: int | None
+    conditions: Conditions
+    goal_radius: float | None
+
+
+def _drive(agents: Sequence[Agent], scenarios: list[Scenario], first: int, settings: _Settings,
+           progress: Callable[[int], None] | None = None) -> list[list[Episode]]:
+    """Each agent's episodes first to first + len(scenarios) - 1 (each scenario as the conditions
+    make it, its shortest path planned once for all agents)."""
+    scenarios = [settings.conditions.scenario(s) for s in scenarios]
+    shortest = [shortest_path_length(s, settings.goal_radius) for s in scenarios]
+    rows = []
+    for agent in agents:
+        episodes = []
+        for i, (scenario, length) in enumerate(zip(scenarios, shortest), first):
+            episodes.append(run_episode(agent, scenario, settings.tier, settings.seed + i, settings.max_steps,
+                                        shortest=length, conditions=settings.conditions,
+                                        goal_radius=settings.goal_radius))
+            if progress:
+                progress(1)
+        rows.append(episodes)
+    return rows
 
 
 def _blocks(items: Iterable, size: int) -> Iterator[tuple[int, list]]:
@@ -349,85 +383,54 @@ def _blocks(items: Iterable, size: int) -> Iterator[tuple[int, list]]:
         first += len(block)
 
 
-def _run_with_progress(agent: Agent, batch: "_Batch", progress: Callable[[int], None] | None) -> list[Episode]:
-    episodes = []
-    for i in range(len(batch.scenarios)):
-        episodes += batch.run(agent, i, i + 1)
-        if progress:
-            progress(1)
-    return episodes
+def _part(source: Sequence[Scenario] | ScenarioSource, start: int, stop: int) -> Iterable[Scenario]:
+    return source.part(start, stop) if hasattr(source, "part") else source[start:stop]
 
 
-@dataclass(frozen=True)
-class _Batch:
-    """A block of the episodes every agent drives in one :func:`evaluate`: scenario i with seed ``seed + i``."""
-
-    scenarios: list[Scenario]
-    shortest: list[float]
-    tier: str
-    seed: int
-    max_steps: int | None
-    conditions: Conditions
-    goal_radius: float | None
-
-    def run(self, agent: Agent, start: int, stop: int) -> list[Episode]:
-        """Episodes ``start`` to ``stop`` (exclusive) of ``agent``."""
-        return [run_episode(agent, self.scenarios[i], self.tier, self.seed + i, self.max_steps,
-                            shortest=self.shortest[i], conditions=self.conditions, goal_radius=self.goal_radius)
-                for i in range(start, stop)]
-
-    def part(self, start: int, stop: int) -> "_Batch":
-        """Episodes ``start`` to ``stop`` alone (what a worker is sent), seeded as they are here."""
-        return dataclasses.replace(self, scenarios=self.scenarios[start:stop], shortest=self.shortest[start:stop],
-                                   seed=self.seed + start)
+_WORKER: dict[str, object] = {}  # a worker process's agents, scenarios and settings, unpickled once as it starts
 
 
-_WORKER: dict[str, object] = {}  # a worker process's agents, unpickled once when it starts
-
-
-def _start_worker(agents: list) -> None:
-    _WORKER["agents"] = agents
+def _start_worker(agents: list, source: Sequence[Scenario] | ScenarioSource, settings: _Settings) -> None:
+    _WORKER["agents"], _WORKER["source"], _WORKER["settings"] = agents, source, settings
     torch = sys.modules.get("torch")  # loaded by unpickling a policy
     if torch is not None:
         torch.set_num_threads(1)  # a worker per core: more threads each would only contend
 
 
-def _run_chunk(agent_index: int, batch: _Batch) -> list[Episode]:
-    return batch.run(_WORKER["agents"][agent_index], 0, len(batch.scenarios))
+def _run_chunk(start: int, stop: int) -> list[list[Episode]]:
+    scenarios = list(_part(_WORKER["source"], start, stop))
+    return _drive(_WORKER["agents"], scenarios, start, _WORKER["settings"])
 
 
-@contextlib.contextmanager
-def _worker_pool(agents: list, workers: int) -> Iterator[ProcessPoolExecutor]:
-    """``workers`` fresh processes (``spawn``: no thread or simulator state of this process is
-    copied), each holding the agents (a policy opened from a file is opened again there, by its
-    path); the chunks not yet begun are dropped if the evaluation fails."""
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(workers, mp_context=context, initializer=_start_worker, initargs=(agents,)) as pool:
-        try:
-            yield pool
-        except BaseException:
-            pool.shutdown(wait=True, cancel_futures=True)
-            raise
-
-
-def _in_processes(pool: ProcessPoolExecutor, agents: int, batch: _Batch, workers: int,
+def _in_processes(agents: list, source: Sequence[Scenario] | ScenarioSource, settings: _Settings, workers: int,
                   progress: Callable[[int], None] | None) -> list[list[Episode]]:
-    """Each of the ``agents``' episodes of ``batch`` in chunks over the pool's processes, each
-    chunk sent with its own scenarios. Every episode builds its own world from its scenario and
-    seed, so it ends as it does in this process."""
-    count = len(batch.scenarios)
-    size = max(1, math.ceil(count * agents / (4 * workers)))  # a few chunks per worker keep them all busy
-    chunks = [(a, start, min(start + size, count)) for a in range(agents) for start in range(0, count, size)]
-    futures = {pool.submit(_run_chunk, a, batch.part(start, stop)): (a, start) for a, start, stop in chunks}
-    done: dict[tuple[int, int], list[Episode]] = {}
-    for future in as_completed(futures):
-        episodes = future.result()  # a worker's error (a ConfigError too) is raised here
-        done[futures[future]] = episodes
-        if progress:
-            progress(len(episodes))
-    rows: list[list[Episode]] = [[] for _ in range(agents)]
-    for a, start, _ in chunks:
-        rows[a] += done[(a, start)]
+    """Every agent's episodes in chunks of episodes over ``workers`` fresh processes (``spawn``: no
+    thread or simulator state of this process is copied). Every episode builds its own world from
+    its scenario and seed, so it ends as it does in this process. The agents, the scenarios (a
+    source: the recipe that draws them, each worker drawing its chunks' own) and the settings are
+    sent once per worker as it starts (a policy opened from a file is opened again there, by its
+    path); a chunk is two numbers, as scenarios sent with each chunk (hundreds of kB) could fill
+    the queue's pipe, and a Ctrl-C then left the process waiting on it."""
+    count = len(source)
+    size = min(max(1, math.ceil(count / (4 * workers))), EVALUATION_BLOCK)  # a few chunks per worker keep them all busy
+    chunks = [(start, min(start + size, count)) for start in range(0, count, size)]
+    done: dict[int, list[list[Episode]]] = {}
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(min(workers, len(chunks)), mp_context=context, initializer=_start_worker,
+                             initargs=(agents, source, settings)) as pool:
+        futures = {pool.submit(_run_chunk, *chunk): chunk[0] for chunk in chunks}
+        try:
+            for future in as_completed(futures):
+                done[futures[future]] = rows = future.result()  # a worker's error (a ConfigError too) is raised here
+                if progress:
+                    progress(sum(len(episodes) for episodes in rows))
+        except BaseException:
+            pool.shutdown(wait=True, cancel_futures=True)  # the chunks not yet begun are dropped
+            raise
+    rows: list[list[Episode]] = [[] for _ in agents]
+    for start, _ in chunks:
+        for row, episodes in zip(rows, done[start]):
+            row += episodes
     return rows
 
 

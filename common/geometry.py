@@ -24,10 +24,11 @@ def hypot_excess(dx: float, dy: float, reach: float) -> float:
     a few times cheaper, unless the two are within rounding of each other, where it is that
     difference itself, so a comparison with it gives hypot's answer to the last bit."""
     squared, limit = dx * dx + dy * dy, reach * reach
-    if squared > limit * (1.0 + 1e-9):
-        return 1.0
-    if squared < limit * (1.0 - 1e-9):
-        return -1.0
+    if limit > 1e-290:  # squares of smaller lengths underflow, and lose the bits the margin counts on
+        if squared > limit * (1.0 + 1e-9):
+            return 1.0
+        if squared < limit * (1.0 - 1e-9):
+            return -1.0
     return math.hypot(dx, dy) - reach
 
 

@@ -551,6 +551,27 @@ def test_an_evaluations_scenarios_are_drawn_as_they_are_read(monkeypatch):
     assert list(itertools.islice(scenarios, 2)) == list(_scenarios(args, count=2)) and len(draws) == 4
 
 
+def test_a_scenario_that_cannot_be_drawn_is_refused_before_any_episode_in_any_block(tmp_path, monkeypatch, capsys):
+    """Drawn a block at a time, episode 7's scenario (a radius range reaching below zero) was
+    refused only after the block of episodes before it had run, and their results lost."""
+    import common.evaluation
+
+    monkeypatch.setattr("common.evaluation.EVALUATION_BLOCK", 2)
+    ran: list[int] = []
+    run_episode = common.evaluation.run_episode
+    monkeypatch.setattr(common.evaluation, "run_episode", lambda *a, **k: ran.append(1) or run_episode(*a, **k))
+    world = tmp_path / "negative.yaml"
+    world.write_text("world: {width: 10, height: 10}\nrobot: {kinematics: {name: diff}, shape: {name: circle, radius: 0.2}, "
+                     "state: [1, 1, 0], goal: [9, 9, 0]}\nobstacle:\n  - number: 1\n    distribution: {name: random, "
+                     "range_low: [4, 4, 0], range_high: [6, 6, 0]}\n    shape: {name: circle, random_shape: true, "
+                     "radius_range: [-0.02, 0.5]}\n")
+    code = main(["compare", "--controllers", "go_to_goal", "--scenario-file", str(world), "--episodes", "10",
+                 "--max-steps", "1", "--out", str(tmp_path / "out")])
+    assert code == 2 and not ran
+    assert "radius_range: must give radii > 0" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_world_no_tier_can_build_is_refused_by_validate_and_named_where_it_is_driven(tmp_path, capsys):
     """validate said ok to a polygon robot among movers, which every command then refused; and a
     refusal raised where a world is driven named no file."""

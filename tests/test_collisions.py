@@ -182,6 +182,8 @@ def test_hypot_excess_compares_with_a_reach_as_hypot_does_to_the_last_bit():
             assert np.sign(hypot_excess(dx, dy, reach)) == np.sign(distance - reach), (dx, dy, reach)
             checked += 1
     assert checked == 3000 * 14
+    # Lengths whose squares underflow: the squares lose the bits, hypot does not.
+    assert hypot_excess(2.7132e-162, 2.7132e-162, 3.7852e-162) > 0.0
 
 
 def test_a_point_beyond_a_segments_bounds_is_beyond_the_segment_and_one_within_is_not_passed_over():

@@ -132,6 +132,33 @@ def test_episodes_run_in_worker_processes_end_as_they_do_in_this_one():
     assert sum(seen) == 14
 
 
+@pytest.mark.slow
+def test_worker_processes_draw_their_own_scenarios_and_end_as_this_one(monkeypatch):
+    """The CLI's scenarios go to the workers as the recipe that draws them (a chunk of scenarios
+    sent through the pool's queue could fill its pipe and hang a Ctrl-C); each worker draws its
+    chunks' own, two episodes at a time here."""
+    import argparse
+    import pickle
+
+    from common.controllers import make_controller
+    from common.curriculum.cli import _scenarios
+
+    monkeypatch.setattr("common.evaluation.EVALUATION_BLOCK", 2)
+    args = argparse.Namespace(seed=100000, world="flatland", episodes=None, suite="cluttered", scenario_file=None)
+    drawn = _scenarios(args, count=7)
+    assert pickle.loads(pickle.dumps(drawn)) == drawn
+    assert list(drawn.part(3, 5)) == list(drawn)[3:5]
+    agents = [make_controller("go_to_goal"), make_controller("reactive")]
+    here = evaluate(agents, list(drawn), seed=100000, goal_radius=0.1)
+    there = evaluate(agents, drawn, seed=100000, goal_radius=0.1, jobs=2)
+
+    def rows(summaries):
+        return [[(e.scenario, e.seed, e.outcome, e.steps, e.path_length) for e in s.rows] for s in summaries]
+
+    assert rows(there) == rows(here)
+    assert len({e.outcome for s in here for e in s.rows}) > 1
+
+
 def test_an_evaluation_reads_its_scenarios_a_block_at_a_time(monkeypatch):
     """A million episodes' scenarios held at once took tens of GB before the first episode: the
     scenarios drawn stay within a block of the episodes driven."""

@@ -20,7 +20,7 @@ from common.task import MAX_EPISODES
 
 if TYPE_CHECKING:
     from common.conditions import Conditions
-    from common.scenario import Scenario
+    from common.scenario import RobotProfile, Scenario
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports a command Ctrl-C stopped
@@ -228,7 +228,8 @@ def _bench(args: argparse.Namespace) -> int:
 
 def _scenarios(args: argparse.Namespace, count: int | None = None, conditions=None, first: int = 0):
     """The scenarios an eval/compare/render run uses, from the ``first``: a suite's, or a world
-    file's (parsed once; a file with random placements is drawn anew per episode, from seed S + i).
+    file's (a file with random placements is drawn anew per episode, from seed S + i), as a
+    :class:`Drawn` (a bad file or suite name refused here, before anything is drawn).
     Scenario i is drawn from its own seed alone, so the 1,000,000th costs what the first does. A
     suite laid out for its robot (``passages``) is drawn for the robot of ``conditions``."""
     from common.generators import get_suite
@@ -237,29 +238,44 @@ def _scenarios(args: argparse.Namespace, count: int | None = None, conditions=No
     count = args.episodes if count is None else count
     seed = args.seed + first
     if args.scenario_file:
-        file = WorldFile(args.scenario_file)
-        return Drawn(count, lambda: (file.scenario(seed + i) for i in range(count)))
+        WorldFile(args.scenario_file)  # a file that is no world is refused here
+        return Drawn(count, seed, file=args.scenario_file)
+    get_suite(args.suite)  # as an unknown name is
     robot = conditions.for_tier(args.world, strict=False).profile if conditions is not None else None
-    suite = get_suite(args.suite)
-    return Drawn(count, lambda: suite.scenarios(count=count, seed=seed, robot=robot))
+    return Drawn(count, seed, suite=args.suite, robot=robot)
 
 
 @dataclass(frozen=True)
 class Drawn:
-    """An evaluation's ``count`` scenarios, drawn as they are read: a million of them held at once
-    would take tens of GB (:data:`common.evaluation.EVALUATION_BLOCK`)."""
+    """An evaluation's ``count`` scenarios from ``seed`` on, of a suite (laid out for ``robot``
+    where it is a suite laid out per robot) or of a world file, drawn as they are read: a million
+    of them held at once would take tens of GB. Pickled, it is the recipe
+    (:class:`common.evaluation.ScenarioSource`): worker processes draw their own."""
 
     count: int
-    draw: Callable[[], Iterator[Scenario]]
+    seed: int
+    suite: str | None = None
+    file: str | None = None
+    robot: "RobotProfile | None" = None
 
     def __len__(self) -> int:
         return self.count
 
     def __iter__(self) -> Iterator[Scenario]:
-        return iter(self.draw())
+        return iter(self.part(0, self.count))
+
+    def part(self, start: int, stop: int) -> Iterator[Scenario]:
+        """Scenarios ``start`` to ``stop`` (exclusive): scenario i is drawn from seed + i alone."""
+        from common.generators import get_suite
+        from common.world_file import WorldFile
+
+        if self.file is not None:
+            file = WorldFile(self.file)
+            return (file.scenario(self.seed + i) for i in range(start, stop))
+        return get_suite(self.suite).scenarios(count=stop - start, seed=self.seed + start, robot=self.robot)
 
     def first(self) -> Scenario:
-        return next(iter(self))
+        return next(iter(self.part(0, 1)))
 
 
 def _settle(args: argparse.Namespace, agents) -> None:
@@ -283,11 +299,9 @@ def _counted(count: int, noun: str) -> str:
 def _announce(args: argparse.Namespace, agents: list, scenarios: Drawn | list, radius: float | None,
               conditions) -> None:
     """Say on stderr what the agents are measured on, so a figure can be told apart and re-run;
-    a world the tier cannot build, or an agent that cannot drive its robot, is refused first,
-    instead. The first scenario stands for them all: a suite's or a file's share their robot,
-    sensors and kind of world, which is all either refusal reads."""
-    first = scenarios.first() if isinstance(scenarios, Drawn) else scenarios[0]
-    _refuse_undrivable(agents, _as_driven(args, [first], conditions), radius)
+    a scenario that cannot be drawn, a world the tier cannot build, or an agent that cannot drive
+    its robot, is refused first, instead (:func:`_refuse_undrivable`)."""
+    _refuse_undrivable(agents, _driven_robots(args, scenarios, conditions), radius)
     resolved = conditions.for_tier(args.world)
     who = agents[0].name if len(agents) == 1 else _counted(len(agents), "agent")
     source = args.scenario_file or f"suite {args.suite}"
@@ -297,20 +311,24 @@ def _announce(args: argparse.Namespace, agents: list, scenarios: Drawn | list, r
           f"judged {judged}; conditions: {knobs}", file=sys.stderr)
 
 
-def _as_driven(args: argparse.Namespace, scenarios: list, conditions) -> list:
-    """The scenarios as ``--world`` drives them under ``conditions``; a world it cannot build (a
-    grid map in 3D, a polygon robot among movers) refused with the suite or file it came from."""
+def _driven_robots(args: argparse.Namespace, scenarios: Drawn | list, conditions) -> list:
+    """Every scenario drawn once and let go (so an evaluation holds only the block it drives; a
+    draw that fails is refused before any episode), checked as ``--world`` drives it under
+    ``conditions`` (a world it cannot build, such as a grid map in 3D or a polygon robot among
+    movers, refused with the suite or file it came from): one of them per robot and lidar."""
     from common.tiers import refuse_unbuildable
 
     resolved = conditions.for_tier(args.world)
-    # A robot that does not fit its world is the robot's error (--env-kwargs put it in), raised here.
-    driven = [resolved.scenario(scenario) for scenario in scenarios]
-    try:
-        for scenario, conditioned in zip(scenarios, driven):
+    distinct = {}
+    for scenario in scenarios:
+        # A robot that does not fit its world is the robot's error (--env-kwargs put it in), raised here.
+        conditioned = resolved.scenario(scenario)
+        try:
             refuse_unbuildable(args.world, scenario, conditioned)
-    except ConfigError as error:
-        raise ConfigError(args.scenario_file or f"suite {args.suite}", error.field, error.problem) from None
-    return driven
+        except ConfigError as error:
+            raise ConfigError(args.scenario_file or f"suite {args.suite}", error.field, error.problem) from None
+        distinct[(conditioned.robot, conditioned.lidar)] = conditioned
+    return list(distinct.values())
 
 
 def _refuse_undrivable(agents: list, scenarios: list, radius: float | None) -> None:

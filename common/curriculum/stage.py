@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import warnings
+from typing import Iterator
 
 import common
 from common.conditions import conditions_of
@@ -23,11 +24,11 @@ from common.scenario import RobotProfile, Scenario
 TEST_SEED_SHIFT = 100_000
 
 
-def stage_scenarios(stage: StageSpec, count: int, first: int) -> list[Scenario]:
+def stage_scenarios(stage: StageSpec, count: int, first: int) -> Iterator[Scenario]:
     """A draw of the stage's eval suite (judged within :func:`stage_radius`; a suite laid out for
-    its robot, for the stage's)."""
+    its robot, for the stage's), drawn as it is read (a million held at once would take tens of GB)."""
     robot = conditions_of(stage.env_kwargs).for_tier(stage.world).profile
-    return list(get_suite(stage.eval.suite).scenarios(count=count, seed=first, robot=robot))
+    return get_suite(stage.eval.suite).scenarios(count=count, seed=first, robot=robot)
 
 
 def stage_radius(stage: StageSpec) -> float | None:
