@@ -19,6 +19,7 @@ import itertools
 import math
 import multiprocessing
 import os
+import signal
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -391,6 +392,9 @@ _WORKER: dict[str, object] = {}  # a worker process's agents, scenarios and sett
 
 
 def _start_worker(agents: list, source: Sequence[Scenario] | ScenarioSource, settings: _Settings) -> None:
+    # A Ctrl-C reaches every process of the terminal's group: the parent ends the workers, who
+    # would otherwise catch it, report it and take the next chunk (minutes of episodes).
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     _WORKER["agents"], _WORKER["source"], _WORKER["settings"] = agents, source, settings
     torch = sys.modules.get("torch")  # loaded by unpickling a policy
     if torch is not None:
@@ -424,7 +428,10 @@ def _in_processes(agents: list, source: Sequence[Scenario] | ScenarioSource, set
                 done[futures[future]] = rows = future.result()  # a worker's error (a ConfigError too) is raised here
                 if progress:
                     progress(sum(len(episodes) for episodes in rows))
-        except BaseException:
+        except BaseException as error:
+            if not isinstance(error, Exception):  # Ctrl-C: the chunks running are dropped too
+                for process in list(pool._processes.values()):  # no public way before Python 3.14's terminate_workers
+                    process.terminate()
             pool.shutdown(wait=True, cancel_futures=True)  # the chunks not yet begun are dropped
             raise
     rows: list[list[Episode]] = [[] for _ in agents]

@@ -551,6 +551,23 @@ def test_an_evaluations_scenarios_are_drawn_as_they_are_read(monkeypatch):
     assert list(itertools.islice(scenarios, 2)) == list(_scenarios(args, count=2)) and len(draws) == 4
 
 
+def test_a_world_file_is_read_once_for_a_whole_evaluation(tmp_path):
+    """Workers re-read the file for every chunk: one edited mid-run mixed two worlds in one run,
+    unchecked, and repeated its warnings."""
+    import argparse
+    import pickle
+
+    from common.curriculum.cli import _scenarios
+
+    world = tmp_path / "random.yaml"
+    world.write_text(RANDOM_WORLD)
+    args = argparse.Namespace(seed=7, world="flatland", episodes=None, suite=None, scenario_file=str(world))
+    drawn = _scenarios(args, count=3)
+    before = list(drawn)
+    world.write_text("not: [a world")
+    assert list(pickle.loads(pickle.dumps(drawn)).part(0, 3)) == before == list(drawn)
+
+
 def test_a_scenario_that_cannot_be_drawn_is_refused_before_any_episode_in_any_block(tmp_path, monkeypatch, capsys):
     """Drawn a block at a time, episode 7's scenario (a radius range reaching below zero) was
     refused only after the block of episodes before it had run, and their results lost."""

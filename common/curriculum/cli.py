@@ -21,6 +21,7 @@ from common.task import MAX_EPISODES
 if TYPE_CHECKING:
     from common.conditions import Conditions
     from common.scenario import RobotProfile, Scenario
+    from common.world_file import WorldFile
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports a command Ctrl-C stopped
@@ -238,8 +239,9 @@ def _scenarios(args: argparse.Namespace, count: int | None = None, conditions=No
     count = args.episodes if count is None else count
     seed = args.seed + first
     if args.scenario_file:
-        WorldFile(args.scenario_file)  # a file that is no world is refused here
-        return Drawn(count, seed, file=args.scenario_file)
+        # Parsed here once (a file that is no world refused here): every draw, the workers' too,
+        # comes from this reading, so a file edited mid-run changes nothing of the run.
+        return Drawn(count, seed, file=WorldFile(args.scenario_file))
     get_suite(args.suite)  # as an unknown name is
     robot = conditions.for_tier(args.world, strict=False).profile if conditions is not None else None
     return Drawn(count, seed, suite=args.suite, robot=robot)
@@ -248,14 +250,14 @@ def _scenarios(args: argparse.Namespace, count: int | None = None, conditions=No
 @dataclass(frozen=True)
 class Drawn:
     """An evaluation's ``count`` scenarios from ``seed`` on, of a suite (laid out for ``robot``
-    where it is a suite laid out per robot) or of a world file, drawn as they are read: a million
+    where it is a suite laid out per robot) or of a parsed world file, drawn as they are read: a million
     of them held at once would take tens of GB. Pickled, it is the recipe
     (:class:`common.evaluation.ScenarioSource`): worker processes draw their own."""
 
     count: int
     seed: int
     suite: str | None = None
-    file: str | None = None
+    file: "WorldFile | None" = None
     robot: "RobotProfile | None" = None
 
     def __len__(self) -> int:
@@ -267,11 +269,9 @@ class Drawn:
     def part(self, start: int, stop: int) -> Iterator[Scenario]:
         """Scenarios ``start`` to ``stop`` (exclusive): scenario i is drawn from seed + i alone."""
         from common.generators import get_suite
-        from common.world_file import WorldFile
 
         if self.file is not None:
-            file = WorldFile(self.file)
-            return (file.scenario(self.seed + i) for i in range(start, stop))
+            return (self.file.scenario(self.seed + i) for i in range(start, stop))
         return get_suite(self.suite).scenarios(count=stop - start, seed=self.seed + start, robot=self.robot)
 
     def first(self) -> Scenario:
