@@ -302,10 +302,13 @@ before its first episode."""
 
 
 class ScenarioSource(Protocol):
-    """Scenarios drawn on demand: how many, and those from ``start`` to ``stop`` (exclusive), each
-    the same whenever drawn. A source that pickles lets worker processes draw their own."""
+    """Scenarios drawn on demand: how many, all of them in order, and those from ``start`` to
+    ``stop`` (exclusive), each the same whenever drawn. A source that pickles lets worker
+    processes draw their own."""
 
     def __len__(self) -> int: ...
+
+    def __iter__(self) -> Iterator[Scenario]: ...
 
     def part(self, start: int, stop: int) -> Iterable[Scenario]: ...
 
@@ -333,14 +336,13 @@ def evaluate(
     must anyway; ``progress`` then hears of a chunk of episodes at a time."""
     settings = _Settings(tier, seed, max_steps, (conditions or Conditions()).for_tier(tier), goal_radius)
     workers = min(jobs, os.cpu_count() or 1)
-    source = scenarios if hasattr(scenarios, "part") else None
     if workers > 1:
-        source = list(scenarios) if source is None else source
-        if len(agents) * len(source) > 1:
-            rows = _in_processes(list(agents), source, settings, workers, progress)
+        scenarios = scenarios if hasattr(scenarios, "part") else list(scenarios)
+        if len(agents) * len(scenarios) > 1:
+            rows = _in_processes(list(agents), scenarios, settings, workers, progress)
             return [summarise(agent.name, episodes) for agent, episodes in zip(agents, rows)]
-    rows: list[list[Episode]] = [[] for _ in agents]
-    for first, block in _blocks(scenarios if source is None else _part(source, 0, len(source)), EVALUATION_BLOCK):
+    rows = [[] for _ in agents]
+    for first, block in _blocks(scenarios, EVALUATION_BLOCK):
         for row, more in zip(rows, _drive(agents, block, first, settings, progress)):
             row += more
     return [summarise(agent.name, episodes) for agent, episodes in zip(agents, rows)]
@@ -384,10 +386,6 @@ def _blocks(items: Iterable, size: int) -> Iterator[tuple[int, list]]:
         first += len(block)
 
 
-def _part(source: Sequence[Scenario] | ScenarioSource, start: int, stop: int) -> Iterable[Scenario]:
-    return source.part(start, stop) if hasattr(source, "part") else source[start:stop]
-
-
 _WORKER: dict[str, object] = {}  # a worker process's agents, scenarios and settings, unpickled once as it starts
 
 
@@ -402,7 +400,8 @@ def _start_worker(agents: list, source: Sequence[Scenario] | ScenarioSource, set
 
 
 def _run_chunk(start: int, stop: int) -> list[list[Episode]]:
-    scenarios = list(_part(_WORKER["source"], start, stop))
+    source = _WORKER["source"]
+    scenarios = list(source.part(start, stop)) if hasattr(source, "part") else source[start:stop]
     return _drive(_WORKER["agents"], scenarios, start, _WORKER["settings"])
 
 
