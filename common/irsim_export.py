@@ -6,8 +6,9 @@ names (a ``back_and_forth`` route as the goal list a ``loop`` runs through; a wa
 ``range_low``/``range_high``, IR-SIM drawing its first goal itself), a group as one YAML group with
 its ``group_behavior``, a mover blind to the robot as ``target_roles: obstacle``. What IR-SIM cannot
 say is a one-line :class:`ConfigError`: members of a group whose parameters differ (IR-SIM's groups
-share theirs), an ORCA group that sees the robot (IR-SIM's ORCA sees its group only), and a
-``dash`` mover that yields to the robot (IR-SIM's never does).
+share theirs), an ORCA group that sees the robot (IR-SIM's ORCA sees its group only), a
+``dash`` mover that yields to the robot (IR-SIM's never does), and a mover that slides along walls
+(IR-SIM's pass through them: :func:`passing` is the same world with IR-SIM's movers).
 """
 
 from __future__ import annotations
@@ -81,6 +82,9 @@ def _groups(scenario: Scenario) -> tuple[list[dict], list[dict]]:
         if motion is None:
             obstacles.append(_obstacle(obstacle))
             continue
+        if motion.static_contact == "slide":
+            raise ConfigError(None, f"{where}.static_contact", "IR-SIM's movers pass through static geometry; "
+                                                               "allowed: pass (common.irsim_export.passing)")
         if isinstance(motion.behavior, Dash) and motion.behavior.yield_distance > 0.0 and motion.reacts_to_robot:
             raise ConfigError(None, f"{where}.behavior.yield_distance", "IR-SIM's dash never yields to the robot; "
                                                                         "allowed: 0, or reacts_to_robot: false")
@@ -185,14 +189,26 @@ def scenario_to_irsim(scenario: Scenario) -> dict[str, Any]:
     }
 
 
+def passing(scenario: Scenario) -> Scenario:
+    """The scenario with every mover passing through static geometry, as IR-SIM's do (a sliding
+    one, ``static_contact: slide``, is kept out of it: :mod:`common.motion.slide`)."""
+    def passes(obstacle):
+        motion = getattr(obstacle, "motion", None)
+        if motion is None or motion.static_contact == "pass":
+            return obstacle
+        return obstacle.model_copy(update={"motion": motion.model_copy(update={"static_contact": "pass"})})
+    return scenario.model_copy(update={"obstacles": [passes(obstacle) for obstacle in scenario.obstacles]})
+
+
 def fixed_routes(scenario: Scenario, count: int | None = None) -> Scenario:
     """The scenario with its people (the first ``count``, default all) each walking back and forth
     to their first goal, planning alone (ORCA's people in their group: IR-SIM runs ORCA for groups
-    only): a crowd both simulators move alike (a wanderer's next goals are drawn by each simulator
-    from its own generator)."""
+    only) and passing through static geometry: a crowd both simulators move alike (a wanderer's
+    next goals are drawn by each simulator from its own generator)."""
     people = []
     for person in scenario.movers[:count]:
         group = person.motion.group if isinstance(person.motion.behavior, Orca) else None
-        motion = person.motion.model_copy(update={"group": group, "wander": None, "route": "back_and_forth"})
+        motion = person.motion.model_copy(update={"group": group, "wander": None, "route": "back_and_forth",
+                                                  "static_contact": "pass"})
         people.append(person.model_copy(update={"motion": motion}))
     return scenario.model_copy(update={"obstacles": [*scenario.static_obstacles, *people]})

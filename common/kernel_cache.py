@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parent.parent
 KERNEL_MODULES = (
     "common/geometry.py", "common/polygons.py", "common/placement.py", "common/layouts.py", "common/occupancy.py",
     "common/irsim_format.py", "common/irsim_geometry.py", "common/kinematics.py", "common/motion/orca.py",
-    "common/motion/packing.py", "common/motion/sfm.py", "common/motion/steering.py", "common/motion/step.py",
+    "common/motion/packing.py", "common/motion/sfm.py", "common/motion/slide.py", "common/motion/steering.py", "common/motion/step.py",
     "common/motion/table.py",
     "common/moving_kinds.py", "common/observations.py", "common/planners/astar.py", "common/planners/collision.py",
     "common/planners/footprint.py", "common/planners/rrt.py", "common/planners/smoothing.py", "common/readings.py", "common/route.py",

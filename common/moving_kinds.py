@@ -23,10 +23,11 @@ ends of the rows only), so most three-row draws are redrawn: 3% of the scenarios
 rows. The suites keep that mix, as their figures were measured on it.
 
 Options (a suite's variants): ``reacting`` (True or False: every person and driver sees the robot, or none)
-and ``behavior`` (``orca`` or ``sfm`` for the whole crowd). Movers pass through each other and
-through static geometry too (collision mode ``unobstructed_obstacles``, IR-SIM's); the robot
-stops on any contact. In the crossing corridors that lets people pushed sideways cross a wall and
-walk on behind it (docs/movers.md#known-limits).
+and ``behavior`` (``orca`` or ``sfm`` for the whole crowd). Movers pass through each other
+(collision mode ``unobstructed_obstacles``, IR-SIM's); the robot stops on any contact. People
+slide along walls, shelves and crates rather than walk into them (``static_contact: slide``,
+:mod:`common.motion.slide`): pushed sideways by the crowd, IR-SIM's would cross a corridor's wall
+or walk into a shelf's end.
 Each kind draws from its own seeded stream, so the static kinds' scenarios are untouched. The
 placements are compiled loops on the caller's generator: a new scenario costs well under a
 millisecond (``curriculum bench``'s ``reset_ms_*``).
@@ -103,7 +104,8 @@ def _person(x: float, y: float, radius: float, speed: float, behavior: str, reac
     kind = ORCA_CROWD if behavior == "orca" else Sfm(vmax=speed, **CROWD_SFM)
     # ORCA plans a group with the robot in it or without: who sees the robot is part of the group.
     motion = Motion(behavior=kind, goals=goals, route=route, wander=region, vel_max=(speed, speed), goal_threshold=0.3,
-                    group=group if reacting else f"{group}-unaware", reacts_to_robot=reacting, label="person")
+                    group=group if reacting else f"{group}-unaware", reacts_to_robot=reacting, label="person",
+                    static_contact="slide")
     return CircleObstacle(x=x, y=y, radius=radius, height=1.7, motion=motion)
 
 

@@ -457,6 +457,9 @@ class Scenario(Frozen):
         groups: dict[str, Motion] = {}
         for index, motion in movers + ([(-1, self.robot_motion)] if self.robot_motion is not None else []):
             where = "robot_motion" if index < 0 else f"obstacles.{index}.motion"
+            if motion.static_contact == "slide" and (index < 0 or not isinstance(self.obstacles[index], CircleObstacle)):
+                raise ValueError(f"{where}.static_contact: slide keeps circle obstacles out of static geometry; "
+                                 "allowed: pass")
             if self.world.walls:  # a walled world cannot be left: every goal must lie inside it
                 for k, (x, y) in enumerate(motion.goals):
                     if not self.world.contains(x, y):

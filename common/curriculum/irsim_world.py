@@ -6,7 +6,8 @@ The agent reads only what IR-SIM gives: its robot state (the pose, which stands 
 IR-SIM has no wheels to dead-reckon with), the velocity it moved at (the IMU's yaw rate is its w)
 and its lidar's ranges, whose beams the export points where the scenario's point. A contact is
 IR-SIM's collision flag; arrival is judged by the evaluator, as in every tier. Movers move as
-IR-SIM moves them (they are not reported: no social figures here). Conditions IR-SIM cannot
+IR-SIM moves them (they are not reported: no social figures here): through walls and shelves,
+where the tiers' generated people slide along them (:func:`common.irsim_export.passing`). Conditions IR-SIM cannot
 model (delays, wheel dynamics, odometry noise, the 3D knobs) are refused for this world
 (:data:`common.conditions.NOT_IN_IRSIM`).
 """
@@ -23,7 +24,7 @@ from common.conditions import Conditions
 from common.curriculum.stdout import stdout_to_stderr
 from common.errors import ConfigError
 from common.grid_maps import OWN_GENERATORS, GridMap, occupancy, write_occupancy_image
-from common.irsim_export import scenario_to_irsim
+from common.irsim_export import passing, scenario_to_irsim
 from common.irsim_package import import_irsim
 from common.kinematics import Pose2D
 from common.readings import Imu, Odometry, Readings, frozen
@@ -52,7 +53,7 @@ class IrsimWorld:
         self.scenario = self.conditions.scenario(scenario)
         self.period = self.scenario.world.step_time  # s: one step
         with tempfile.TemporaryDirectory() as folder, stdout_to_stderr():
-            data = scenario_to_irsim(_with_map_image(self.scenario, Path(folder)))
+            data = scenario_to_irsim(passing(_with_map_image(self.scenario, Path(folder))))
             path = Path(folder) / "world.yaml"
             path.write_text(yaml.safe_dump(data, sort_keys=False))
             try:

@@ -248,7 +248,7 @@ class Movers:
                 c0, c1 = self._rvo(m)
             else:
                 c0, c1 = command(t.F, t.I, t.params, t.goals, t.objects, t.segments, m, self._dt, self._neighbors)
-            move(t.F, t.I, t.objects, t.outlines, t.irsim, m, c0, c1, self._dt)
+            move(t.F, t.I, t.objects, t.outlines, t.irsim, m, c0, c1, self._dt, *self._contacts[:3])
 
     def _rvo(self, m: int) -> tuple[float, float]:
         """IR-SIM's rvo command of mover ``m`` among the others where they are now."""

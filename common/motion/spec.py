@@ -17,7 +17,8 @@ Movers of one ``group`` plan together from one snapshot of the world (IR-SIM's
 ``group_behavior``); a mover without a group plans on its own, seeing the others where they are
 at that moment of the step (IR-SIM's ``behavior``). ``orca`` always plans in a group.
 ``reacts_to_robot`` says whether the controlled robot is among what a mover avoids: real people
-do; the hard case is a mover that does not.
+do; the hard case is a mover that does not. ``static_contact: slide`` keeps a mover out of walls,
+shelves and posts (:mod:`common.motion.slide`), where IR-SIM's walk through them.
 
 Velocity limits, accelerations and the command are in the kinematics' own frame, as IR-SIM has
 them: ``omni`` (forward, lateral), ``diff`` (linear, angular).
@@ -112,6 +113,10 @@ class Motion(Frozen):
     target_roles: Literal["all", "robot", "obstacle"] = "all"  # IR-SIM's: whose roles it avoids
     role: Literal["obstacle", "robot"] = "obstacle"  # IR-SIM's: which collision rule stops it
     label: Literal[LABELS] = "person"  # what it is: the social figures count people
+    # What static geometry (walls, shelves, posts) does to it: "pass" as IR-SIM (the world's
+    # collision mode decides: stop halts it, the unobstructed modes let it through); "slide": it
+    # never enters it, keeping the part of a step along the surface (common.motion.slide; circles only).
+    static_contact: Literal["pass", "slide"] = "pass"
 
     @model_validator(mode="before")
     @classmethod

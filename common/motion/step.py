@@ -29,6 +29,7 @@ from common.kernel_cache import kernel, uncounted
 from common.kinematics import unicycle_euler
 from common.motion.orca import orca_velocities
 from common.motion.packing import view1, view2, view3
+from common.motion.slide import slide_out
 from common.motion.sfm import (
     NEIGHBOR_THRESHOLD, SOCIAL, VMAX, desire, pair_force, social_force_velocity, velocity_under,
 )
@@ -38,7 +39,7 @@ from common.motion.steering import (
 from common.motion.table import (
     ACC0, ACC1, ANGLE_TOLERANCE, ARRIVED, BEHAVIOR, BOX, DIFF, DRIVEN, EXTEND, GOAL_THRESHOLD, GROUP, HEAD, KINEMATICS, LENGTH,
     LOOP, OBSTACLE, OBSTACLES, OR, ORCA, OROLE, OUTLINE, OVX, OVY, OX, OY, PLAN0, PLAN1, PLANNED, RADIUS, REACTS, ROBOT,
-    ROBOTS, ROLE, ROUTE_LENGTH, ROW, SEEN_RADIUS, SFM, SHAPE, START_X, START_Y, STOPPED, TAIL, TARGET, THETA,
+    ROBOTS, ROLE, ROUTE_LENGTH, ROW, SEEN_RADIUS, SFM, SHAPE, SLIDES, START_X, START_Y, STOPPED, TAIL, TARGET, THETA,
     UNOBSTRUCTED, V0, V1, VMAX0, VMAX1, VMIN0, VMIN1, WANDER, WANDER_X0, WANDER_X1, WANDER_Y0, WANDER_Y1, WIDTH, X, Y,
 )
 
@@ -350,8 +351,9 @@ def place_disc(objects, outlines, irsim, row, outline, x, y, theta) -> None:
 
 
 @uncounted
-def move(F, I, objects, outlines, irsim, m, c0, c1, dt) -> None:  # noqa: E741
-    """Apply a command to mover ``m`` for one step (clipped to its window; IR-SIM's kinematics)."""
+def move(F, I, objects, outlines, irsim, m, c0, c1, dt, circles, boxes, walls) -> None:  # noqa: E741
+    """Apply a command to mover ``m`` for one step (clipped to its window; IR-SIM's kinematics); a
+    sliding mover is kept out of the static ``circles``, ``boxes`` and ``walls`` (:mod:`common.motion.slide`)."""
     lo0, lo1, hi0, hi1 = velocity_range(F, m, dt)
     c0, c1 = min(max(c0, lo0), hi0), min(max(c1, lo1), hi1)
     theta = F[m, THETA]
@@ -360,19 +362,25 @@ def move(F, I, objects, outlines, irsim, m, c0, c1, dt) -> None:  # noqa: E741
     else:
         dx, dy = omni_to_world(theta, c0, c1)
         x, y = F[m, X] + dx * dt, F[m, Y] + dy * dt
+    vx, vy = world_velocity(I[m, KINEMATICS], theta, c0, c1)
+    if I[m, SLIDES] == 1:
+        sx, sy = slide_out(x, y, F[m, RADIUS], F[m, X], F[m, Y], circles, boxes, walls)
+        if sx != x or sy != y:  # others see the velocity it moved with, not the one it was commanded
+            x, y, vx, vy = sx, sy, (sx - F[m, X]) / dt, (sy - F[m, Y]) / dt
     F[m, X], F[m, Y], F[m, THETA], F[m, V0], F[m, V1] = x, y, theta, c0, c1
     row = I[m, ROW]
     place_disc(objects, outlines[m], irsim, row, I[m, OUTLINE], x, y, theta)
-    objects[row, OVX], objects[row, OVY] = world_velocity(I[m, KINEMATICS], theta, c0, c1)
+    objects[row, OVX], objects[row, OVY] = vx, vy
 
 
 @uncounted
-def advance(F, I, params, goals, routes, objects, segments, outlines, irsim, dt, neighbors) -> None:  # noqa: E741
+def advance(F, I, params, goals, routes, objects, segments, outlines, irsim, dt, neighbors,  # noqa: E741
+            circles, boxes, walls) -> None:
     """Every mover's step in order (none of them uses ``rvo``; the wanderers have drawn)."""
     for m in range(F.shape[0]):
         if prepare(F, I, goals, routes, objects, m):
             c0, c1 = command(F, I, params, goals, objects, segments, m, dt, neighbors)
-            move(F, I, objects, outlines, irsim, m, c0, c1, dt)
+            move(F, I, objects, outlines, irsim, m, c0, c1, dt, circles, boxes, walls)
 
 
 @uncounted
@@ -536,7 +544,7 @@ def finish_step(F, I, params, goals, routes, objects, segments, outlines, irsim,
     goal first)."""
     sync_robot(F, I, objects, outline, irsim, robot, x, y, yaw, v, w, lateral, stopped)
     if not advanced:
-        advance(F, I, params, goals, routes, objects, segments, outlines, irsim, dt, neighbors)
+        advance(F, I, params, goals, routes, objects, segments, outlines, irsim, dt, neighbors, circles, boxes, walls)
     touched = settle(F, I, goals, robot, mode, circles, boxes, walls, rings, ring_index)
     snapshot(F, I, objects, moving, seen_circles, seen_boxes, states, circle_rows, box_rows)
     if members.shape[0] > 0:

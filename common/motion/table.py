@@ -38,8 +38,8 @@ from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenar
 FLOATS = 28
 # Integer columns of I.
 (KINEMATICS, BEHAVIOR, SHAPE, GROUP, ROLE, UNOBSTRUCTED, REACTS, TARGET, LOOP, WANDER, STOPPED, ARRIVED, HEAD, TAIL,
- ROUTE_LENGTH, ROW, PLANNED, DRIVEN, RVO_MODE, OUTLINE) = range(20)
-INTS = 20
+ ROUTE_LENGTH, ROW, PLANNED, DRIVEN, RVO_MODE, OUTLINE, SLIDES) = range(21)
+INTS = 21
 # Codes.
 OMNI, DIFF = 0, 1
 DASH, RVO, ORCA, SFM = 0, 1, 2, 3
@@ -185,7 +185,8 @@ def mover_table(scenario: Scenario) -> MoverTable:
                      int(motion.reacts_to_robot), _TARGETS[motion.target_roles],
                      int(motion.route != "once" and motion.wander is None), int(motion.wander is not None), 0, 0, 0, 0,
                      len(route), index + 1, 0, int(obstacle is None),
-                     RVO_MODES.index(behavior.mode) if isinstance(behavior, Rvo) else 0, size])
+                     RVO_MODES.index(behavior.mode) if isinstance(behavior, Rvo) else 0, size,
+                     int(motion.static_contact == "slide")])
         if route:  # a wanderer without goals draws its first at reset (Movers.reset)
             route_table[m, :len(route)] = route
         params.append(_behavior_row(motion, step_time))
