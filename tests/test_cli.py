@@ -568,6 +568,24 @@ def test_a_world_file_is_read_once_for_a_whole_evaluation(tmp_path):
     assert list(pickle.loads(pickle.dumps(drawn)).part(0, 3)) == before == list(drawn)
 
 
+def test_checking_the_scenarios_before_the_episodes_shows_its_progress(monkeypatch, tmp_path):
+    """The check before the first episode draws every scenario: a million took half an hour with
+    nothing on the screen."""
+    import rich.progress
+
+    shown: list[tuple[str, int]] = []
+    track = rich.progress.track
+
+    def recording_track(sequence, description, total, **kwargs):
+        shown.append((description, total))
+        return track(sequence, description, total=total, **kwargs)
+
+    monkeypatch.setattr(rich.progress, "track", recording_track)
+    code = main(["compare", "--controllers", "go_to_goal", "--suite", "sparse", "--episodes", "3", "--max-steps", "1",
+                 "--out", str(tmp_path / "out")])
+    assert code == 0 and shown == [("checking 3 scenarios", 3)]
+
+
 def test_a_scenario_that_cannot_be_drawn_is_refused_before_any_episode_in_any_block(tmp_path, monkeypatch, capsys):
     """Drawn a block at a time, episode 7's scenario (a radius range reaching below zero) was
     refused only after the block of episodes before it had run, and their results lost."""

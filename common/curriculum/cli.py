@@ -316,11 +316,15 @@ def _driven_robots(args: argparse.Namespace, scenarios: Drawn | list, conditions
     draw that fails is refused before any episode), checked as ``--world`` drives it under
     ``conditions`` (a world it cannot build, such as a grid map in 3D or a polygon robot among
     movers, refused with the suite or file it came from): one of them per robot and lidar."""
+    from rich.progress import track
+
     from common.tiers import refuse_unbuildable
 
     resolved = conditions.for_tier(args.world)
     distinct = {}
-    for scenario in scenarios:
+    # A draw costs about a millisecond: a million scenarios are minutes of checking, shown as such.
+    for scenario in track(scenarios, f"checking {len(scenarios):,} scenarios", total=len(scenarios),
+                          transient=True, console=_stderr_console()):
         # A robot that does not fit its world is the robot's error (--env-kwargs put it in), raised here.
         conditioned = resolved.scenario(scenario)
         try:
