@@ -239,3 +239,41 @@ def test_a_box_shaped_persons_gap_is_measured_to_its_box_not_the_circle_around_i
     # (a corner 0.3 m above the robot's) either side of the robot's x.
     reach = 0.5 + (math.sqrt(0.7**2 - 0.5**2) if robot.shape == "circle" else 0.2 + math.sqrt(0.5**2 - 0.3**2))
     assert social.time_near == pytest.approx(2 * reach, abs=0.11)
+
+
+def test_ctrl_c_ends_an_evaluation_in_worker_processes_within_seconds(tmp_path):
+    """A parent that waited for the running chunks after Ctrl-C sat minutes on them (a chunk of
+    `dwa` episodes here is minutes). Sent to the whole group, as a terminal does, once the
+    workers are driving: exit 130 within seconds, no traceback, nothing written, no worker left."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    command = [sys.executable, "-c", "import sys; from common.curriculum.cli import main; sys.exit(main())",
+               "compare", "--controllers", "dwa", "--suite", "crowd", "--episodes", "3000", "--jobs", "2",
+               "--out", str(tmp_path / "out")]
+    process = subprocess.Popen(command, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        announced = ""
+        while "3000 episodes from seed" not in announced:  # the line naming what is measured: checks done
+            announced = process.stderr.readline()
+            assert announced, "the evaluation ended before it began"
+        time.sleep(8.0)  # the workers start (spawned: each imports the project) and drive
+        assert process.poll() is None
+        os.killpg(process.pid, signal.SIGINT)
+        code = process.wait(timeout=30)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+    assert code == 130
+    said = process.stderr.read()
+    assert said.strip().endswith("interrupted") and "Traceback" not in said, said
+    deadline = time.monotonic() + 10.0  # no worker left behind in the group (init reaps the last within a second)
+    with pytest.raises(ProcessLookupError):
+        while time.monotonic() < deadline:
+            os.killpg(process.pid, 0)
+            time.sleep(0.2)
+    assert not (tmp_path / "out" / "comparison.md").exists()
