@@ -457,9 +457,8 @@ class Scenario(Frozen):
         groups: dict[str, Motion] = {}
         for index, motion in movers + ([(-1, self.robot_motion)] if self.robot_motion is not None else []):
             where = "robot_motion" if index < 0 else f"obstacles.{index}.motion"
-            if motion.static_contact == "slide" and (index < 0 or not isinstance(self.obstacles[index], CircleObstacle)):
-                raise ValueError(f"{where}.static_contact: slide keeps circle obstacles out of static geometry; "
-                                 "allowed: pass")
+            if motion.static_contact == "slide":
+                self._check_slide(where, motion, None if index < 0 else self.obstacles[index])
             if self.world.walls:  # a walled world cannot be left: every goal must lie inside it
                 for k, (x, y) in enumerate(motion.goals):
                     if not self.world.contains(x, y):
@@ -475,6 +474,18 @@ class Scenario(Frozen):
                     raise ValueError(f"{where}.group: the movers of group {motion.group!r} differ in behaviour, "
                                      "kinematics or (ORCA) whether they see the robot; allowed: one of each per group")
         return self
+
+    def _check_slide(self, where: str, motion: Motion, body) -> None:
+        """A sliding mover is a circle whose step is shorter than its radius: slid out from where a
+        step ends, a longer one could end past a thin wall's middle and leave on its far side."""
+        if not isinstance(body, CircleObstacle):
+            raise ValueError(f"{where}.static_contact: slide keeps circle obstacles out of static geometry; "
+                             "allowed: pass")
+        step = motion.speed * self.world.step_time
+        if step >= body.radius:
+            raise ValueError(f"{where}.static_contact: slide needs a step shorter than the radius {body.radius:g} m "
+                             f"(here {motion.speed:g} m/s x {self.world.step_time:g} s = {step:g} m); allowed: pass, "
+                             "or a slower mover")
 
     @property
     def movers(self) -> list[Obstacle]:

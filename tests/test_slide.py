@@ -11,7 +11,7 @@ import pytest
 from common.errors import ConfigError
 from common.generators import SUITES, generate
 from common.irsim_export import fixed_routes, passing, scenario_to_irsim
-from common.geometry import segment_distance
+from common.geometry import box_distance, segment_distance
 from common.motion.slide import CLEARANCE, slide_out
 from common.motion.step import _touches_static
 from common.motion.table import static_contacts
@@ -28,6 +28,28 @@ def test_a_step_into_a_wall_keeps_the_part_along_it():
     assert x == pytest.approx(1.1, abs=1e-12)
     assert y == pytest.approx(0.2 + CLEARANCE, abs=1e-12)
     assert slide_out(1.1, 0.3, 0.2, 1.0, 0.4, NO_CIRCLES, NO_BOXES, FLOOR) == (1.1, 0.3)  # clear: untouched
+
+
+def test_a_step_into_any_wall_post_or_shelf_slides_to_just_off_it():
+    # Pushed out to exactly CLEARANCE, a body measured again read a rounding short about half the
+    # time, and after the last pass its step was thrown away: people stood frozen at angled walls.
+    rng = np.random.default_rng(0)
+    r = 0.2
+    for _ in range(600):
+        angle = rng.uniform(-math.pi, math.pi)
+        normal, along = np.array([math.cos(angle), math.sin(angle)]), np.array([-math.sin(angle), math.cos(angle)])
+        centre = rng.uniform(2.0, 8.0, 2)  # each surface faces the body 1.5 m from here along the normal
+        start = centre + normal * (1.5 + r + rng.uniform(0.001, 0.05))
+        end = start - normal * rng.uniform(0.06, 0.15) + along * rng.uniform(-0.1, 0.1)  # 1 to 10 cm into reach
+        wall = np.array([[*(centre + 1.5 * normal - 3 * along), *(centre + 1.5 * normal + 3 * along)]])
+        post = np.array([[*centre, 1.5]])
+        shelf = np.array([[*centre, *normal, 1.5, 0.05]])  # its end, 0.1 m wide, faces the body: a side or a corner
+        for surfaces, gap in (((NO_CIRCLES, NO_BOXES, wall), lambda p: segment_distance(*p, *wall[0])),
+                              ((post, NO_BOXES, NO_SEGMENTS), lambda p: math.dist(p, centre) - 1.5),
+                              ((NO_CIRCLES, shelf, NO_SEGMENTS), lambda p: box_distance(*p, *centre, 3.0, 0.1, *normal))):
+            x, y = slide_out(*end, r, *start, *surfaces)
+            assert (x, y) != tuple(start)
+            assert r < gap((x, y)) < r + 2 * CLEARANCE
 
 
 def test_a_corner_pushes_out_of_both_walls_and_a_narrow_wedge_stops_the_step():
@@ -88,6 +110,11 @@ def test_slide_is_for_circles_and_irsim_refuses_it():
             "motion": {"goals": [[6.0, 6.0]], "static_contact": "slide"}}
     with pytest.raises(ValueError, match=r"obstacles\.0\.motion\.static_contact: slide keeps circle obstacles"):
         Scenario.model_validate({"obstacles": [cart]})
+    runner = {"type": "circle", "x": 5.0, "y": 5.0, "radius": 0.2,
+              "motion": {"goals": [[6.0, 6.0]], "static_contact": "slide", "kinematics": "diff", "vel_max": [2.5, 1.0]}}
+    with pytest.raises(ValueError, match=r"obstacles\.0\.motion\.static_contact: slide needs a step shorter than "
+                                         r"the radius 0\.2 m \(here 2\.5 m/s x 0\.1 s = 0\.25 m\)"):
+        Scenario.model_validate({"obstacles": [runner]})  # a step past a thin wall's middle would leave on its far side
     crowd = generate("crowd", 2, 0.5, "eval", behavior="sfm")
     with pytest.raises(ConfigError, match=r"obstacles\.\d+\.motion\.static_contact: IR-SIM's movers pass through"):
         scenario_to_irsim(crowd)

@@ -21,6 +21,10 @@ from common.geometry import beyond_segment_bounds
 from common.kernel_cache import uncounted
 
 CLEARANCE = 1e-6  # m: a slid body stops this far off the surface, so contact tests after the step read no touch
+# m: how near counts as touching here. Pushed out to exactly CLEARANCE, a body measured again
+# reads a rounding short of it about half the time: touching at CLEARANCE, the next pass pushed
+# again, and after the last the step was thrown away (people stood frozen at walls).
+TOUCH = 0.5 * CLEARANCE
 PASSES = 3  # at a corner one push can lead into the other surface; the last pass checks
 
 
@@ -40,26 +44,27 @@ def _push(x: float, y: float, px: float, py: float, reach: float, from_x: float,
 
 
 @uncounted
-def _off_segment(x, y, x1, y1, x2, y2, reach, from_x, from_y):
-    """(x, y) pushed off the segment (x1, y1)-(x2, y2) to ``reach``, and whether it moved."""
+def _off_segment(x, y, x1, y1, x2, y2, r, from_x, from_y):
+    """(x, y) pushed off the segment (x1, y1)-(x2, y2) to ``r`` + CLEARANCE if within ``r`` +
+    TOUCH of it, and whether it moved."""
     ex, ey = x2 - x1, y2 - y1
     length2 = ex * ex + ey * ey
     t = 0.0 if length2 <= 0.0 else min(1.0, max(0.0, ((x - x1) * ex + (y - y1) * ey) / length2))
     px, py = x1 + t * ex, y1 + t * ey
-    if (x - px) * (x - px) + (y - py) * (y - py) >= reach * reach:
+    if (x - px) * (x - px) + (y - py) * (y - py) >= (r + TOUCH) * (r + TOUCH):
         return x, y, False
-    x, y = _push(x, y, px, py, reach, from_x, from_y)
+    x, y = _push(x, y, px, py, r + CLEARANCE, from_x, from_y)
     return x, y, True
 
 
 @uncounted
 def _off_box(x, y, bx, by, c, s, half_length, half_width, r, from_x, from_y):
     """(x, y) pushed off a box (centre, heading cosine and sine, half sizes) to ``r`` + CLEARANCE
-    from its outline, and whether it moved."""
+    from its outline if within ``r`` + TOUCH of it, and whether it moved."""
     dx, dy = x - bx, y - by
     u, v = c * dx + s * dy, -s * dx + c * dy  # in the box's frame
-    reach = r + CLEARANCE
-    if abs(u) >= half_length + reach or abs(v) >= half_width + reach:
+    touch, reach = r + TOUCH, r + CLEARANCE
+    if abs(u) >= half_length + touch or abs(v) >= half_width + touch:
         return x, y, False
     if abs(u) < half_length and abs(v) < half_width:  # the centre inside: out by the nearer side
         if half_length - abs(u) < half_width - abs(v):
@@ -68,7 +73,7 @@ def _off_box(x, y, bx, by, c, s, half_length, half_width, r, from_x, from_y):
             v = math.copysign(half_width + reach, v)
         return bx + c * u - s * v, by + s * u + c * v, True
     qu, qv = min(half_length, max(-half_length, u)), min(half_width, max(-half_width, v))
-    if (u - qu) * (u - qu) + (v - qv) * (v - qv) >= reach * reach:
+    if (u - qu) * (u - qu) + (v - qv) * (v - qv) >= touch * touch:
         return x, y, False
     x, y = _push(x, y, bx + c * qu - s * qv, by + s * qu + c * qv, reach, from_x, from_y)
     return x, y, True
@@ -77,19 +82,18 @@ def _off_box(x, y, bx, by, c, s, half_length, half_width, r, from_x, from_y):
 @uncounted
 def _out_once(x, y, r, from_x, from_y, circles, boxes, segments):
     """One pass over every surface, each pushing (x, y) out of it in turn; whether any did."""
-    reach = r + CLEARANCE
     moved = False
     for k in range(segments.shape[0]):
         x1, y1, x2, y2 = segments[k, 0], segments[k, 1], segments[k, 2], segments[k, 3]
-        if beyond_segment_bounds(x, y, x1, y1, x2, y2, reach):
+        if beyond_segment_bounds(x, y, x1, y1, x2, y2, r + TOUCH):
             continue
-        x, y, pushed = _off_segment(x, y, x1, y1, x2, y2, reach, from_x, from_y)
+        x, y, pushed = _off_segment(x, y, x1, y1, x2, y2, r, from_x, from_y)
         moved = moved or pushed
     for k in range(circles.shape[0]):
-        cx, cy, outer = circles[k, 0], circles[k, 1], circles[k, 2] + reach
-        if abs(x - cx) >= outer or abs(y - cy) >= outer or (x - cx) ** 2 + (y - cy) ** 2 >= outer * outer:
+        cx, cy, near = circles[k, 0], circles[k, 1], circles[k, 2] + r + TOUCH
+        if abs(x - cx) >= near or abs(y - cy) >= near or (x - cx) ** 2 + (y - cy) ** 2 >= near * near:
             continue
-        x, y = _push(x, y, cx, cy, outer, from_x, from_y)
+        x, y = _push(x, y, cx, cy, circles[k, 2] + r + CLEARANCE, from_x, from_y)
         moved = True
     for k in range(boxes.shape[0]):
         x, y, pushed = _off_box(x, y, boxes[k, 0], boxes[k, 1], boxes[k, 2], boxes[k, 3], boxes[k, 4], boxes[k, 5], r,
