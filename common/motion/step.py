@@ -29,7 +29,7 @@ from common.kernel_cache import kernel, uncounted
 from common.kinematics import unicycle_euler
 from common.motion.orca import orca_velocities
 from common.motion.packing import view1, view2, view3
-from common.motion.slide import slide_out
+from common.motion.slide import slack, slide_out
 from common.motion.sfm import (
     NEIGHBOR_THRESHOLD, SOCIAL, VMAX, desire, pair_force, social_force_velocity, velocity_under,
 )
@@ -39,7 +39,7 @@ from common.motion.steering import (
 from common.motion.table import (
     ACC0, ACC1, ANGLE_TOLERANCE, ARRIVED, BEHAVIOR, BOX, DIFF, DRIVEN, EXTEND, GOAL_THRESHOLD, GROUP, HEAD, KINEMATICS, LENGTH,
     LOOP, OBSTACLE, OBSTACLES, OR, ORCA, OROLE, OUTLINE, OVX, OVY, OX, OY, PLAN0, PLAN1, PLANNED, RADIUS, REACTS, ROBOT,
-    ROBOTS, ROLE, ROUTE_LENGTH, ROW, SEEN_RADIUS, SFM, SHAPE, SLIDES, START_X, START_Y, STOPPED, TAIL, TARGET, THETA,
+    ROBOTS, ROLE, ROUTE_LENGTH, ROW, SEEN_RADIUS, SFM, SHAPE, SLACK, SLIDES, START_X, START_Y, STOPPED, TAIL, TARGET, THETA,
     UNOBSTRUCTED, V0, V1, VMAX0, VMAX1, VMIN0, VMIN1, WANDER, WANDER_X0, WANDER_X1, WANDER_Y0, WANDER_Y1, WIDTH, X, Y,
 )
 
@@ -364,9 +364,14 @@ def move(F, I, objects, outlines, irsim, m, c0, c1, dt, circles, boxes, walls) -
         x, y = F[m, X] + dx * dt, F[m, Y] + dy * dt
     vx, vy = world_velocity(I[m, KINEMATICS], theta, c0, c1)
     if I[m, SLIDES] == 1:
-        sx, sy = slide_out(x, y, F[m, RADIUS], F[m, X], F[m, Y], circles, boxes, walls)
-        if sx != x or sy != y:  # others see the velocity it moved with, not the one it was commanded
-            x, y, vx, vy = sx, sy, (sx - F[m, X]) / dt, (sy - F[m, Y]) / dt
+        travel = abs(x - F[m, X]) + abs(y - F[m, Y])  # at least the distance moved
+        if travel < F[m, SLACK]:  # nothing within reach yet: the slide would leave the step as it is
+            F[m, SLACK] -= travel
+        else:
+            sx, sy = slide_out(x, y, F[m, RADIUS], F[m, X], F[m, Y], circles, boxes, walls)
+            if sx != x or sy != y:  # others see the velocity it moved with, not the one it was commanded
+                x, y, vx, vy = sx, sy, (sx - F[m, X]) / dt, (sy - F[m, Y]) / dt
+            F[m, SLACK] = slack(x, y, F[m, RADIUS], circles, boxes, walls)
     F[m, X], F[m, Y], F[m, THETA], F[m, V0], F[m, V1] = x, y, theta, c0, c1
     row = I[m, ROW]
     place_disc(objects, outlines[m], irsim, row, I[m, OUTLINE], x, y, theta)

@@ -34,8 +34,8 @@ from common.scenario import BoxObstacle, CircleObstacle, PolygonObstacle, Scenar
 # Float columns of F.
 (X, Y, THETA, V0, V1, VMIN0, VMIN1, VMAX0, VMAX1, ACC0, ACC1, RADIUS, LENGTH, WIDTH, GOAL_THRESHOLD, ANGLE_TOLERANCE,
  WANDER_X0, WANDER_Y0, WANDER_X1, WANDER_Y1, START_X, START_Y, INIT_THETA, INIT_V0, INIT_V1, PLAN0, PLAN1,
- SEEN_RADIUS) = range(28)
-FLOATS = 28
+ SEEN_RADIUS, SLACK) = range(29)
+FLOATS = 29
 # Integer columns of I.
 (KINEMATICS, BEHAVIOR, SHAPE, GROUP, ROLE, UNOBSTRUCTED, REACTS, TARGET, LOOP, WANDER, STOPPED, ARRIVED, HEAD, TAIL,
  ROUTE_LENGTH, ROW, PLANNED, DRIVEN, RVO_MODE, OUTLINE, SLIDES) = range(21)
@@ -178,7 +178,7 @@ def mover_table(scenario: Scenario) -> MoverTable:
         floats.append([x, y, theta, v0, v1, *motion.lower, *motion.vel_max, *motion.acce, radius,
                        *((body.length, body.width) if box else (0.0, 0.0)), motion.goal_threshold,
                        behavior.angle_tolerance if isinstance(behavior, Dash) else 0.1,
-                       *(motion.wander or (0.0, 0.0, 0.0, 0.0)), x, y, theta, v0, v1, 0.0, 0.0, seen])
+                       *(motion.wander or (0.0, 0.0, 0.0, 0.0)), x, y, theta, v0, v1, 0.0, 0.0, seen, 0.0])
         ints.append([DIFF if motion.kinematics == "diff" else OMNI, _BEHAVIORS[behavior.name], BOX if box else CIRCLE,
                      -1 if motion.group is None else groups.setdefault(motion.group, len(groups)),
                      ROBOT if motion.role == "robot" else OBSTACLE, 0 if obstacle is None else int(obstacle.unobstructed),
