@@ -421,8 +421,9 @@ def _in_processes(agents: list, source: Sequence[Scenario] | ScenarioSource, set
     context = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(min(workers, len(chunks)), mp_context=context, initializer=_start_worker,
                              initargs=(agents, source, settings)) as pool:
-        futures = {pool.submit(_run_chunk, *chunk): chunk[0] for chunk in chunks}
         try:
+            # Submitting starts the workers: a Ctrl-C then must end them too, not wait for them.
+            futures = {pool.submit(_run_chunk, *chunk): chunk[0] for chunk in chunks}
             for future in as_completed(futures):
                 done[futures[future]] = rows = future.result()  # a worker's error (a ConfigError too) is raised here
                 if progress:

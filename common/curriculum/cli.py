@@ -322,9 +322,11 @@ def _driven_robots(args: argparse.Namespace, scenarios: Drawn | list, conditions
 
     resolved = conditions.for_tier(args.world)
     distinct = {}
-    # A draw costs about a millisecond: a million scenarios are minutes of checking, shown as such.
+    # A draw costs about a millisecond: a million scenarios are minutes of checking, shown as such
+    # on a terminal (elsewhere the bar's last line would come before a refusal's one line).
+    console = _stderr_console()
     for scenario in track(scenarios, f"checking {len(scenarios):,} scenarios", total=len(scenarios),
-                          transient=True, console=_stderr_console()):
+                          transient=True, console=console, disable=not console.is_terminal):
         # A robot that does not fit its world is the robot's error (--env-kwargs put it in), raised here.
         conditioned = resolved.scenario(scenario)
         try:
