@@ -208,7 +208,6 @@ def fixed_routes(scenario: Scenario, count: int | None = None) -> Scenario:
     people = []
     for person in scenario.movers[:count]:
         group = person.motion.group if isinstance(person.motion.behavior, Orca) else None
-        motion = person.motion.model_copy(update={"group": group, "wander": None, "route": "back_and_forth",
-                                                  "static_contact": "pass"})
+        motion = person.motion.model_copy(update={"group": group, "wander": None, "route": "back_and_forth"})
         people.append(person.model_copy(update={"motion": motion}))
-    return scenario.model_copy(update={"obstacles": [*scenario.static_obstacles, *people]})
+    return passing(scenario.model_copy(update={"obstacles": [*scenario.static_obstacles, *people]}))

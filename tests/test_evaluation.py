@@ -239,4 +239,3 @@ def test_a_box_shaped_persons_gap_is_measured_to_its_box_not_the_circle_around_i
     # (a corner 0.3 m above the robot's) either side of the robot's x.
     reach = 0.5 + (math.sqrt(0.7**2 - 0.5**2) if robot.shape == "circle" else 0.2 + math.sqrt(0.5**2 - 0.3**2))
     assert social.time_near == pytest.approx(2 * reach, abs=0.11)
-
