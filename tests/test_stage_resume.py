@@ -158,3 +158,24 @@ def test_a_kill_while_a_checkpoint_is_written_leaves_best_zip_from_the_training_
     stage = out / "stages" / "0-open"
     assert read_manifest(stage / "checkpoints" / "last.zip")["timesteps"] == 512
     assert read_manifest(stage / "best.zip")["timesteps"] == 512
+
+
+def test_a_damaged_best_zip_is_refused_before_it_replaces_the_policy(tmp_path):
+    """The stage's end copied best.zip over policy.zip unopened: a best.zip damaged while the run
+    stood (a disk error, a hand) replaced a good policy with its bytes."""
+    import json
+
+    from common.errors import ConfigError
+
+    data = yaml.safe_load(TINY.read_text())
+    data["stages"] = [{**data["stages"][0], "budget": 512, "max_steps": 40,
+                       "eval": {"suite": "open", "episodes": 2, "every": 512}}]
+    config, out = curriculum_from_mapping(data, TINY), tmp_path / "run"
+    Runner(config, out, progress=False).run()
+    stage = out / "stages" / "0-open"
+    good = (stage / "policy.zip").read_bytes()
+    (stage / "best.zip").write_bytes(b"garbage")
+    (out / "state.json").write_text(json.dumps({"done": [], "stages": {}}))  # the stage ends again on resume
+    with pytest.raises(ConfigError, match="best.zip"):
+        Runner(config, out, resume=True, progress=False).run()
+    assert (stage / "policy.zip").read_bytes() == good

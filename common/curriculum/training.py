@@ -10,6 +10,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecNormalize
 
 from common.atomic import atomic_write, atomic_write_all
+from common.curriculum.policy import load_policy
 from common.curriculum.policy_file import Normalizer, policy_writer
 from common.curriculum.replay import replay_writer
 from common.curriculum.run_directory import EvalLog, StagePaths
@@ -105,7 +106,9 @@ class CurriculumCallback(BaseCallback):
         return not self.promoted
 
     def finish(self, model) -> None:
-        """Evaluate the final weights if the last evaluation was earlier; the best checkpoint becomes the policy."""
+        """Evaluate the final weights if the last evaluation was earlier; the best checkpoint becomes
+        the policy, once it opens as one (a damaged best.zip is refused, the policy.zip kept)."""
         if self.last_eval_at < int(model.num_timesteps) and not self.promoted:
             self._evaluate_and_checkpoint(model)
+        load_policy(self.paths.best)
         atomic_write(self.paths.policy, lambda tmp: shutil.copyfile(self.paths.best, tmp))
