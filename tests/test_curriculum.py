@@ -92,6 +92,34 @@ def _with(change: dict, stage: dict | None = None) -> dict:
     (_with({}, {"hyperparams": {"learning_rate": "cos_1e-3"}}), "stages.0.hyperparams.learning_rate", "'lin_<number>'"),
     (_with({}, {"algorithm": "td3", "hyperparams": {"action_noise": {"type": "pink"}}}),
      "stages.0.hyperparams.action_noise", "allowed: {type: normal | ornstein_uhlenbeck"),
+    # Each of these passed `validate` and ended `run` in a traceback inside stable-baselines3.
+    (_with({}, {"algorithm": "td3", "hyperparams": {"action_noise": {"type": "normal", "sigma": float("nan")}}}),
+     "stages.0.hyperparams.action_noise.sigma", "expected a finite number >= 0, got nan"),
+    (_with({}, {"hyperparams": {"ent_coef": "auto"}}), "stages.0.hyperparams.ent_coef", "got 'auto'; allowed: a number >= 0"),
+    (_with({}, {"algorithm": "sac", "hyperparams": {"ent_coef": "auto_-1"}}), "stages.0.hyperparams.ent_coef",
+     "allowed: a number >= 0, 'auto' or 'auto_<initial value > 0>'"),
+    (_with({}, {"algorithm": "sac", "hyperparams": {"target_entropy": "bogus"}}), "stages.0.hyperparams.target_entropy",
+     "allowed: 'auto' or a finite number"),
+    (_with({}, {"algorithm": "sac", "hyperparams": {"train_freq": -1}}), "stages.0.hyperparams.train_freq",
+     "allowed: a whole number >= 1 (steps) or [n, step | episode]"),
+    (_with({}, {"algorithm": "sac", "hyperparams": {"train_freq": [4, "hour"]}}), "stages.0.hyperparams.train_freq",
+     "[n, step | episode]"),
+    (_with({}, {"algorithm": "td3", "hyperparams": {"gradient_steps": 0}}), "stages.0.hyperparams.gradient_steps",
+     "allowed: a whole number >= 1, or -1"),
+    (_with({}, {"algorithm": "sac", "hyperparams": {"target_update_interval": 0}}),
+     "stages.0.hyperparams.target_update_interval", "got 0; allowed: a whole number >= 1"),
+    (_with({}, {"algorithm": "sac", "hyperparams": {"optimize_memory_usage": True}}),
+     "stages.0.hyperparams.optimize_memory_usage", "got True; allowed: false"),
+    (_with({}, {"algorithm": "sac", "hyperparams": {"use_sde_at_warmup": 1}}), "stages.0.hyperparams.use_sde_at_warmup",
+     "allowed: true or false"),
+    (_with({}, {"hyperparams": {"normalize_advantage": "maybe"}}), "stages.0.hyperparams.normalize_advantage",
+     "got 'maybe'; allowed: true or false"),
+    (_with({}, {"hyperparams": {"clip_range_vf": "abc"}}), "stages.0.hyperparams.clip_range_vf", "'lin_<number>'"),
+    (_with({}, {"hyperparams": {"sde_sample_freq": -2}}), "stages.0.hyperparams.sde_sample_freq", "whole number >= -1"),
+    (_with({}, {"hyperparams": {"rollout_buffer_class": "x"}}), "stages.0.hyperparams.rollout_buffer_class",
+     "takes code (a class or its arguments), which a curriculum does not name; allowed: batch_size,"),
+    (_with({}, {"algorithm": "sac", "hyperparams": {"replay_buffer_kwargs": {"foo": 1}}}),
+     "stages.0.hyperparams.replay_buffer_kwargs", "takes code"),
     (_with({}, {"scenarios": {"kind": "sparse"}, "env_kwargs": {"robot": {"radius": 1.5}}}), "stages.0.env_kwargs.robot",
      "no reachable sparse layout in 200 attempts (seed 0) for a robot of bounding radius 1.5 m"),
 ])
@@ -409,6 +437,31 @@ def test_zoo_style_schedules_and_action_noise():
     np.testing.assert_array_equal(out["action_noise"]._sigma, [0.2, 0.2])  # the sigma asked for, per action
     out = resolve_hyperparams({"action_noise": {"type": "ornstein_uhlenbeck", "sigma": 0.3}})
     np.testing.assert_array_equal(out["action_noise"]._sigma, [0.3, 0.3])
+
+
+@pytest.mark.parametrize("algorithm, hyperparams", [
+    ("ppo", {"ent_coef": 0.01, "clip_range_vf": "lin_0.2", "normalize_advantage": False, "sde_sample_freq": -1,
+             "stats_window_size": 10}),
+    ("ppo", {"clip_range_vf": None}),
+    ("sac", {"ent_coef": "auto_0.1", "target_entropy": -2.0, "train_freq": [1, "episode"], "gradient_steps": -1,
+             "target_update_interval": 2, "optimize_memory_usage": False, "use_sde_at_warmup": False}),
+    ("sac", {"ent_coef": 0.2, "target_entropy": "auto", "train_freq": 4}),
+    ("td3", {"train_freq": [2, "step"], "gradient_steps": 2}),
+])
+def test_every_value_the_checks_allow_builds_the_model(algorithm, hyperparams):
+    """What the checks let through, stable-baselines3 takes: a check stricter than SB3 would
+    refuse a curriculum that trains."""
+    import gymnasium as gym
+
+    import flatland  # noqa: F401
+    from common.curriculum.hyperparams import resolve_hyperparams
+    from common.curriculum.policy import algorithm_class
+
+    curriculum_from_mapping(_with({}, {"algorithm": algorithm, "hyperparams": hyperparams}), "c.yaml")
+    env = gym.make("flatland/Nav-v0", world="open")
+    model = algorithm_class(algorithm)("MlpPolicy", env, device="cpu", **resolve_hyperparams(hyperparams))
+    model.learn(8)
+    env.close()
 
 
 def test_policy_zip_is_the_checkpoint_of_the_best_validation(tmp_path, monkeypatch):

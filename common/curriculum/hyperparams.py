@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Callable, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -27,7 +27,7 @@ def _linear(start: float):
 
 
 def _schedule(value: Any, source, field: str) -> Any:
-    """A number as it is (:func:`_check_ranges` has checked it), or ``"lin_<number>"`` as a
+    """A number as it is (:func:`_check_values` has checked it), or ``"lin_<number>"`` as a
     linear schedule from that number to 0."""
     if isinstance(value, str):
         try:
@@ -49,10 +49,64 @@ _RANGES: dict[str, tuple[type, float, float, bool]] = {
     "max_grad_norm": (float, 0.0, math.inf, False), "target_kl": (float, 0.0, math.inf, False),
     "buffer_size": (int, 1, 10**8, True), "learning_starts": (int, 0, 10**9, True), "tau": (float, 0.0, 1.0, False),
     "policy_delay": (int, 1, 10**6, True), "target_policy_noise": (float, 0.0, 1e6, True),
-    "target_noise_clip": (float, 0.0, 1e6, True),
+    "target_noise_clip": (float, 0.0, 1e6, True), "clip_range_vf": (float, 0.0, math.inf, False),
+    "target_update_interval": (int, 1, 10**9, True), "sde_sample_freq": (int, -1, 10**9, True),
+    "stats_window_size": (int, 1, 10**6, True),
 }
-_NULLABLE = {"target_kl"}  # SB3's default, None: no early stop
-_SCHEDULES = ("learning_rate", "clip_range")  # a number, or a schedule written as text
+_NULLABLE = {"target_kl", "clip_range_vf"}  # SB3's defaults, None: no early stop; the value not clipped
+_SCHEDULES = ("learning_rate", "clip_range", "clip_range_vf")  # a number, or a schedule written as text
+_FLAGS = ("use_sde", "normalize_advantage", "use_sde_at_warmup")
+
+
+def _finite(value: Any, low: float) -> bool:
+    return not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value) and value >= low
+
+
+def _ent_coef(value: Any, algorithm: str | None) -> str | None:
+    """What ``ent_coef`` allows if ``value`` is not that, else None: SAC's may be learnt from an
+    initial value (``"auto"``, ``"auto_0.1"``)."""
+    learnt = algorithm != "ppo" and isinstance(value, str) and (
+        value == "auto" or value.startswith("auto_") and _finite(_number(value[5:]), 0.0) and _number(value[5:]) > 0)
+    if _finite(value, 0.0) or learnt:
+        return None
+    return "a number >= 0" + ("" if algorithm == "ppo" else ", 'auto' or 'auto_<initial value > 0>'")
+
+
+def _number(text: str) -> float | None:
+    try:
+        return float(text)
+    except ValueError:
+        return None
+
+
+def _target_entropy(value: Any, algorithm: str | None) -> str | None:
+    return None if value == "auto" or _finite(value, -math.inf) else "'auto' or a finite number"
+
+
+def _train_freq(value: Any, algorithm: str | None) -> str | None:
+    every = value[0] if isinstance(value, list) and len(value) == 2 and value[1] in ("step", "episode") else value
+    ok = not isinstance(every, bool) and isinstance(every, int) and 1 <= every <= 10**9
+    return None if ok else "a whole number >= 1 (steps) or [n, step | episode]"
+
+
+def _gradient_steps(value: Any, algorithm: str | None) -> str | None:
+    ok = not isinstance(value, bool) and isinstance(value, int) and (value == -1 or 1 <= value <= 10**6)
+    return None if ok else "a whole number >= 1, or -1 (as many as the steps collected)"
+
+
+def _no_memory_saving(value: Any, algorithm: str | None) -> str | None:
+    # SB3's replay buffer refuses it beside the timeout handling (truncations bootstrap) these envs need.
+    return None if value is False else "false (the replay buffer's memory saving cannot tell truncations apart)"
+
+
+# Arguments whose values are not numbers in a range: each a check that gives what is allowed, or None.
+_CHECKS: dict[str, Callable[[Any, str | None], str | None]] = {
+    "ent_coef": _ent_coef, "target_entropy": _target_entropy, "train_freq": _train_freq,
+    "gradient_steps": _gradient_steps, "optimize_memory_usage": _no_memory_saving,
+}
+CONFIGURABLE = frozenset(_RANGES) | frozenset(_CHECKS) | frozenset(_FLAGS) | {"policy_kwargs", "action_noise"}
+"""Stable-baselines3's arguments a curriculum may set; the others take code (a buffer's class or
+its arguments), which a YAML file does not name."""
 
 
 def _checked(value: Any, source, field: str, kind: type, low: float, high: float, low_included: bool) -> None:
@@ -66,13 +120,15 @@ def _checked(value: Any, source, field: str, kind: type, low: float, high: float
         raise ConfigError(source, field, f"got {quote(value)}; allowed: {what} {bounds}")
 
 
-def _check_ranges(values: dict[str, Any], source, field: str) -> None:
+def _check_values(values: dict[str, Any], source, field: str, algorithm: str | None) -> None:
     for key, value in values.items():
+        if key in _FLAGS and not isinstance(value, bool):
+            raise ConfigError(source, f"{field}.{key}", f"got {quote(value)}; allowed: true or false")
+        if key in _CHECKS and (allowed := _CHECKS[key](value, algorithm)) is not None:
+            raise ConfigError(source, f"{field}.{key}", f"got {quote(value)}; allowed: {allowed}")
         if key not in _RANGES or (value is None and key in _NULLABLE) or (key in _SCHEDULES and isinstance(value, str)):
             continue
         _checked(value, source, f"{field}.{key}", *_RANGES[key])
-    if not isinstance(values.get("use_sde", False), bool):
-        raise ConfigError(source, f"{field}.use_sde", f"got {quote(values['use_sde'])}; allowed: true or false")
 
 
 def _noise(value: Any, action_dim: int, source, field: str) -> Any:
@@ -81,8 +137,8 @@ def _noise(value: Any, action_dim: int, source, field: str) -> Any:
     if not isinstance(value, dict) or value.get("type") not in _NOISE_TYPES or set(value) - {"type", "sigma"}:
         raise ConfigError(source, field, f"allowed: {{type: {' | '.join(_NOISE_TYPES)}, sigma: <number>}}")
     sigma = value.get("sigma", 0.1)
-    if isinstance(sigma, bool) or not isinstance(sigma, (int, float)) or sigma < 0:
-        raise ConfigError(source, f"{field}.sigma", f"expected a number >= 0, got {quote(sigma)}")
+    if not _finite(sigma, 0.0):
+        raise ConfigError(source, f"{field}.sigma", f"expected a finite number >= 0, got {quote(sigma)}")
     noise = NormalActionNoise if value["type"] == "normal" else OrnsteinUhlenbeckActionNoise
     return noise(mean=np.zeros(action_dim), sigma=float(sigma) * np.ones(action_dim))
 
@@ -143,13 +199,15 @@ def activation_classes() -> dict[str, type]:
 
 
 def resolve_hyperparams(hyperparams: dict[str, Any], action_dim: int = 2, source: str | Path | None = None,
-                        field: str = "hyperparams") -> dict[str, Any]:
-    """SB3 keyword arguments from a stage's YAML hyperparameters."""
+                        field: str = "hyperparams", algorithm: str | None = None) -> dict[str, Any]:
+    """SB3 keyword arguments from a stage's YAML hyperparameters (``algorithm``'s, where known)."""
     out = dict(hyperparams)
-    _check_ranges(out, source, field)
-    for key in ("learning_rate", "clip_range"):
+    _check_values(out, source, field, algorithm)
+    for key in _SCHEDULES:
         if key in out:
             out[key] = _schedule(out[key], source, f"{field}.{key}")
+    if isinstance(out.get("train_freq"), list):
+        out["train_freq"] = tuple(out["train_freq"])  # YAML's [n, unit]: SB3 takes a tuple
     if "action_noise" in out:
         out["action_noise"] = _noise(out["action_noise"], action_dim, source, f"{field}.action_noise")
     if "policy_kwargs" in out:

@@ -38,7 +38,7 @@ from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, ValidationEr
 
 from common.actions import MAPPINGS
 from common.conditions import Conditions
-from common.curriculum.hyperparams import OPTIMIZER_KERNELS, policy_kwargs_from_yaml, resolve_hyperparams
+from common.curriculum.hyperparams import CONFIGURABLE, OPTIMIZER_KERNELS, policy_kwargs_from_yaml, resolve_hyperparams
 from common.curriculum.policy_file import ALGORITHMS
 from common.drive import refuse_other_drives
 from common.errors import ConfigError, did_you_mean, quote
@@ -236,13 +236,18 @@ def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
         raise ConfigError(source, f"{field}.{error.field}", error.problem) from None
     from common.curriculum.policy import algorithm_class  # torch and stable-baselines3: seconds, for curricula only
 
-    allowed = set(inspect.signature(algorithm_class(stage.algorithm).__init__).parameters) - _MANAGED - {"self"}
+    arguments = set(inspect.signature(algorithm_class(stage.algorithm).__init__).parameters)
+    allowed = sorted(arguments & CONFIGURABLE)
     for key in stage.hyperparams:
+        if key in arguments - _MANAGED - CONFIGURABLE - {"self"}:
+            raise ConfigError(source, f"{field}.hyperparams.{key}",
+                              f"takes code (a class or its arguments), which a curriculum does not name; "
+                              f"allowed: {', '.join(allowed)}")
         if key not in allowed:
             raise ConfigError(source, f"{field}.hyperparams.{key}",
-                              f"not a {stage.algorithm.upper()} argument{did_you_mean(key, sorted(allowed))}; "
-                              f"allowed: {', '.join(sorted(allowed))}")
-    resolve_hyperparams(stage.hyperparams, source=source, field=f"{field}.hyperparams")
+                              f"not a {stage.algorithm.upper()} argument{did_you_mean(key, allowed)}; "
+                              f"allowed: {', '.join(allowed)}")
+    resolve_hyperparams(stage.hyperparams, source=source, field=f"{field}.hyperparams", algorithm=stage.algorithm)
     if "policy_kwargs" in stage.hyperparams:
         kwargs = policy_kwargs_from_yaml(stage.hyperparams["policy_kwargs"], source, f"{field}.hyperparams.policy_kwargs")
         if refusal := kwargs.refused_by(stage.algorithm):
