@@ -63,14 +63,17 @@ from collections.abc import Iterable
 from typing import Annotated, Any, Literal, NamedTuple
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, field_validator, model_validator
 
 from common.errors import ConfigError
 from common.robots import PROFILES, RobotFamily, robot_profile
 from common.scenario import RobotProfile, Scenario
 
-Range = tuple[Annotated[float, Field(gt=0.0, le=10.0)], Annotated[float, Field(gt=0.0, le=10.0)]]
-Steps = Annotated[int, Field(ge=0, le=20)]
+# Strict numbers: true, false and "0.5" are what a person wrote by mistake, not 1, 0 and 0.5.
+Scale = Annotated[float, Field(gt=0.0, le=10.0), Strict()]
+Range = tuple[Scale, Scale]
+Steps = Annotated[int, Field(ge=0, le=20), Strict()]
+Fraction = Annotated[float, Field(ge=0.0, le=1.0), Strict()]
 HeadingSource = Literal["wheels", "gyro"]
 ONLY_3D = ("friction", "mass_scale", "control_period", "heading_source", "gyro_noise", "gyro_bias", "accel_noise")
 ONLY_2D = ("dynamics", "robot_family")
@@ -105,19 +108,19 @@ class Conditions(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
     robot: str | dict[str, Any] | None = None
-    lidar_noise: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
-    lidar_beams: Annotated[int, Field(ge=1, le=4096)] | None = None  # LidarSpec.beams's bounds
-    odometry_noise: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
+    lidar_noise: Fraction | None = None
+    lidar_beams: Annotated[int, Field(ge=1, le=4096), Strict()] | None = None  # LidarSpec.beams's bounds
+    odometry_noise: Fraction | None = None
     action_delay: Steps | tuple[Steps, Steps] | None = None
     motor_scale: Range | None = None
     friction: Range | None = None
     mass_scale: Range | None = None
-    control_period: Annotated[float, Field(gt=0.0, le=10.0)] | None = None
+    control_period: Scale | None = None
     dynamics: Literal["kinematic", "first_order"] | None = None
     heading_source: HeadingSource | None = None
-    gyro_noise: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
-    gyro_bias: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
-    accel_noise: Annotated[float, Field(ge=0.0, le=10.0)] | None = None
+    gyro_noise: Fraction | None = None
+    gyro_bias: Fraction | None = None
+    accel_noise: Annotated[float, Field(ge=0.0, le=10.0), Strict()] | None = None
     robot_family: RobotFamily | None = None
 
     @field_validator("robot_family", mode="before")

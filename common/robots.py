@@ -12,7 +12,7 @@ from __future__ import annotations
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, Strict, model_validator
 
 from common.errors import ConfigError, quote
 from common.scenario import LidarSpec, RobotProfile
@@ -49,8 +49,8 @@ def robot_profile(value: str | dict[str, Any] | RobotProfile, field: str = "robo
     raise ConfigError(None, field, f"got {quote(value)}; allowed: a robot name ({', '.join(PROFILES)}) or a mapping")
 
 
-Size = Annotated[float, Field(gt=0.0, le=2.0)]  # m: a robot this project's worlds have room for
-Rate = Annotated[float, Field(gt=0.0, le=10.0)]  # m/s, rad/s
+Size = Annotated[float, Field(gt=0.0, le=2.0), Strict()]  # m: a robot this project's worlds have room for
+Rate = Annotated[float, Field(gt=0.0, le=10.0), Strict()]  # m/s, rad/s
 
 
 class RobotFamily(BaseModel):

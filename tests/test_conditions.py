@@ -198,3 +198,19 @@ def test_a_robot_that_does_not_fit_its_world_is_refused_in_one_line():
     with pytest.raises(ConfigError, match=r"robot: 1998 m across, it does not fit in the 10 x 10 m world"):
         Conditions(robot={"radius": 999}).scenario(Scenario())
     assert main(["compare", "--controllers", "go_to_goal", "--episodes", "1", "--env-kwargs", "robot:{radius: 999}"]) == 2
+
+
+@pytest.mark.parametrize("knobs, field, got", [
+    ({"lidar_beams": True}, "lidar_beams", "True"),  # was one beam
+    ({"action_delay": True}, "action_delay", "True"),  # was a step of delay
+    ({"lidar_noise": "0.5"}, "lidar_noise", "'0.5'"),
+    ({"odometry_noise": False}, "odometry_noise", "False"),
+    ({"motor_scale": [True, True]}, "motor_scale.0", "True"),
+    ({"control_period": True}, "control_period", "True"),
+    ({"robot_family": {"radius": [True, 0.3]}}, "robot_family.radius.0", "True"),
+])
+def test_a_knob_of_the_wrong_type_is_refused_not_read_as_a_number(knobs, field, got):
+    with pytest.raises(ConfigError, match=rf"^c.yaml: env_kwargs.{field}: Input should be a valid (number|integer) \(got {got}\)$"):
+        Conditions.parse(knobs, "c.yaml")
+    # Whole numbers stay numbers where a real number belongs.
+    assert Conditions.parse({"lidar_noise": 0, "motor_scale": [1, 2]}).motor_scale == (1.0, 2.0)
