@@ -589,9 +589,9 @@ def test_a_report_interrupted_while_written_leaves_the_last_one_whole(tmp_path, 
     from common.curriculum.schema import load_curriculum
 
     config = load_curriculum(Path(__file__).parents[1] / "curricula" / "stage1_2d.yaml")
-    (tmp_path / "run.json").write_text(json.dumps({"device": "cpu", "package_version": "0", "git_commit": None}))
-    (tmp_path / "eval.csv").write_text("stage,timesteps,success_rate,spl\nsparse,1000,0.5,0.4\n")
-    write_report(tmp_path, config, {"stages": {}})
+    run = {"device": "cpu", "package_version": "0", "git_commit": None}
+    rows = [{"stage": "sparse", "timesteps": "1000", "success_rate": "0.5", "spl": "0.4"}]
+    write_report(tmp_path, config, {"stages": {}}, run, rows)
     before = {name: (tmp_path / name).read_bytes() for name in ("report.md", "learning_curve.png")}
     assert before["learning_curve.png"].startswith(b"\x89PNG")
 
@@ -599,9 +599,9 @@ def test_a_report_interrupted_while_written_leaves_the_last_one_whole(tmp_path, 
         Path(path).write_bytes(b"\x89PNG half")
         raise KeyboardInterrupt
 
-    (tmp_path / "eval.csv").write_text("stage,timesteps,success_rate,spl\nsparse,1000,0.5,0.4\nsparse,2000,0.9,0.8\n")
+    rows.append({"stage": "sparse", "timesteps": "2000", "success_rate": "0.9", "spl": "0.8"})
     monkeypatch.setattr(Figure, "savefig", killed_while_drawing)
     with pytest.raises(KeyboardInterrupt):
-        write_report(tmp_path, config, {"stages": {}})
+        write_report(tmp_path, config, {"stages": {}}, run, rows)
     assert {name: (tmp_path / name).read_bytes() for name in before} == before
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["eval.csv", "learning_curve.png", "report.md", "run.json"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["learning_curve.png", "report.md"]

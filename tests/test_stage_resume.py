@@ -179,3 +179,26 @@ def test_a_damaged_best_zip_is_refused_before_it_replaces_the_policy(tmp_path):
     with pytest.raises(ConfigError, match="best.zip"):
         Runner(config, out, resume=True, progress=False).run()
     assert (stage / "policy.zip").read_bytes() == good
+
+
+@pytest.mark.parametrize("damage", [
+    lambda text: text.replace(",512,", ",abc,"),  # a row's timesteps
+    lambda text: "stage,steps\n" + text.split("\n", 1)[1],  # the header
+    lambda text: "\udcff".encode("utf-8", "surrogateescape").decode("latin-1") + text,  # bytes that are no UTF-8
+])
+def test_resuming_a_finished_run_with_a_damaged_eval_csv_is_refused_in_one_line(tmp_path, damage):
+    """With every stage done, only the report read eval.csv, parsing it by hand: a damaged row
+    ended the resume in a traceback."""
+    from common.errors import ConfigError
+
+    data = yaml.safe_load(TINY.read_text())
+    data["stages"] = [{**data["stages"][0], "budget": 512, "max_steps": 40,
+                       "eval": {"suite": "open", "episodes": 2, "every": 512}}]
+    config, out = curriculum_from_mapping(data, TINY), tmp_path / "run"
+    Runner(config, out, progress=False).run()
+    log = out / "eval.csv"
+    log.write_bytes(damage(log.read_text()).encode("latin-1"))
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file() and p.name != ".lock"}
+    with pytest.raises(ConfigError, match="eval.csv"):
+        Runner(config, out, resume=True, progress=False).run()
+    assert {p: p.read_bytes() for p in before} == before

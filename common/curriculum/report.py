@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import csv
-import json
 from pathlib import Path
 
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -14,10 +12,9 @@ from common.curriculum.machine import describe
 from common.curriculum.schema import CurriculumConfig
 
 
-def learning_curve(eval_csv: Path, path: Path) -> Path:
-    """Validation success rate and SPL against timesteps, one line per stage."""
-    with eval_csv.open(newline="") as handle:
-        rows = list(csv.DictReader(handle))
+def learning_curve(rows: list[dict], path: Path) -> Path:
+    """Validation success rate and SPL against timesteps, one line per stage, from eval.csv's
+    ``rows`` (as :meth:`~common.curriculum.run_directory.EvalLog.rows` checks them)."""
     figure = Figure(figsize=(8, 4), dpi=100)
     FigureCanvasAgg(figure)
     ax = figure.add_subplot(1, 1, 1)
@@ -38,9 +35,9 @@ def learning_curve(eval_csv: Path, path: Path) -> Path:
     return path
 
 
-def write_report(out: Path, config: CurriculumConfig, state: dict) -> Path:
-    """report.md: per stage, training figures and the final (test-draw) evaluation."""
-    run = json.loads((out / "run.json").read_text())
+def write_report(out: Path, config: CurriculumConfig, state: dict, run: dict, rows: list[dict]) -> Path:
+    """report.md: per stage, training figures and the final (test-draw) evaluation; ``run``: the
+    run's run.json, ``rows``: its eval.csv, both as the runner checked them."""
     lines = [f"# {config.name}", "",
              f"seed {config.seed}, device {run['device']}, package {run['package_version']}, commit {run['git_commit']}"
              + (f", on {on}" if (on := describe(run.get("machine"))) else ""), "",
@@ -63,6 +60,6 @@ def write_report(out: Path, config: CurriculumConfig, state: dict) -> Path:
               "![learning curve](learning_curve.png)", ""]
     path = out / "report.md"
     # One set, each file whole: a kill while they are written (a resume rewrites them) leaves the last ones.
-    atomic_write_all({out / "learning_curve.png": lambda tmp: learning_curve(out / "eval.csv", tmp),
+    atomic_write_all({out / "learning_curve.png": lambda tmp: learning_curve(rows, tmp),
                       path: lambda tmp: tmp.write_text("\n".join(lines))})
     return path

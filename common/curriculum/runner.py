@@ -161,6 +161,7 @@ class Runner:
         self.on_evaluation = on_evaluation  # sees every periodic evaluation's eval.csv row (a sweep reports them)
         self.eval_log: EvalLog | None = None
         self.commit: str | None = None
+        self.provenance: dict = {}  # run.json, once prepare() has read and checked it
         self._lock: FileLock | None = None
 
     def prepare(self) -> dict:
@@ -220,7 +221,7 @@ class Runner:
         for key in ("device", "package_version"):  # the report's first line reads them
             if not isinstance(provenance.get(key), str):
                 raise ConfigError(self.out / "run.json", key, "missing; the run directory is damaged")
-        self.commit = provenance["git_commit"]
+        self.commit, self.provenance = provenance["git_commit"], provenance
         return state
 
     def release(self) -> None:
@@ -250,7 +251,7 @@ class Runner:
                 write_json(self.out / "state.json", state)
             from common.curriculum.report import write_report
 
-            write_report(self.out, self.config, state)
+            write_report(self.out, self.config, state, self.provenance, self.eval_log.rows())
             if self.config.evidence is not None:
                 from common.curriculum.evidence import gather_evidence
 
