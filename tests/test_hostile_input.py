@@ -253,6 +253,19 @@ def test_a_replay_buffer_is_arrays_and_a_pickled_one_is_refused(tmp_path):
         load_replay(model().replay_buffer, tmp_path / "evil.npz")
     assert not marker.exists()
 
+    # A NaN in a filled row is refused (training on it would put NaN into the weights); past the
+    # filled rows the buffer's contents are never read.
+    for name, row in (("observations", 3), ("rewards", 29), ("next_observations", 0)):
+        arrays = dict(np.load(path))
+        arrays[name][row] = np.nan
+        np.savez(tmp_path / "nan.npz", **arrays)
+        with pytest.raises(ConfigError, match=f"{name}: holds NaN or infinite values"):
+            load_replay(model().replay_buffer, tmp_path / "nan.npz")
+    whole = {name: np.concatenate([array, np.full((50 - len(array), *array.shape[1:]), np.inf, array.dtype)])
+             if array.ndim and array.dtype.kind == "f" else array for name, array in np.load(path).items()}
+    np.savez(tmp_path / "whole.npz", **whole)  # the whole buffer, as files were once written
+    load_replay(model().replay_buffer, tmp_path / "whole.npz")
+
 
 # -- actions -------------------------------------------------------------------------------------
 

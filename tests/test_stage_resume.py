@@ -202,3 +202,38 @@ def test_resuming_a_finished_run_with_a_damaged_eval_csv_is_refused_in_one_line(
     with pytest.raises(ConfigError, match="eval.csv"):
         Runner(config, out, resume=True, progress=False).run()
     assert {p: p.read_bytes() for p in before} == before
+
+
+def _rewritten_manifest(path: Path, change: dict) -> None:
+    """``path``'s zip with its manifest changed by hand, unchecked (as a damaged file would be)."""
+    import json
+    import zipfile
+
+    with zipfile.ZipFile(path) as source:
+        members = {info.filename: source.read(info) for info in source.infolist()}
+    manifest = {**json.loads(members["nav_manifest.json"]), **change}
+    members["nav_manifest.json"] = json.dumps(manifest).encode()
+    with zipfile.ZipFile(path, "w") as target:
+        for name, data in members.items():
+            target.writestr(name, data)
+
+
+@pytest.mark.parametrize("damage, message", [
+    ({"timesteps": 10**30}, "timesteps"),  # TensorBoard's purge met it with a traceback
+    ({"env_rng": ["hello"] * 4}, "env_rng: not the envs' generator states"),
+    ({"env_rng": [{"bit_generator": "Evil", "state": "x"}] * 4}, "env_rng"),
+])
+def test_a_damaged_checkpoint_manifest_is_refused_in_one_line_on_resume(tmp_path, damage, message):
+    from common.errors import ConfigError
+
+    config, out = _config(), tmp_path / "run"
+
+    def interrupt(row: dict) -> None:
+        if row["stage"] == "sparse":
+            raise _Interrupted
+
+    with pytest.raises(_Interrupted):
+        Runner(config, out, progress=False, on_evaluation=interrupt).run()
+    _rewritten_manifest(out / "stages" / "1-sparse" / "checkpoints" / "last.zip", damage)
+    with pytest.raises(ConfigError, match=message):
+        Runner(config, out, resume=True, progress=False).run()

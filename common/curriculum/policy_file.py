@@ -95,6 +95,9 @@ class FinalEval(BaseModel):
     episodes: Annotated[int, Field(strict=True, ge=1, le=1_000_000)]
 
 
+MAX_TIMESTEPS = 10**12  # a thousand years of training at this machine's 30,000 env steps/s
+
+
 class Manifest(BaseModel):
     """What a policy zip says about itself; the fields this project acts on are validated, the
     rest (provenance, evaluations) is kept as it is."""
@@ -109,8 +112,9 @@ class Manifest(BaseModel):
     max_steps: Annotated[int, Field(ge=1, le=MAX_STEPS)] = 500
     policy_kwargs: PolicyKwargs = PolicyKwargs()
     use_sde: bool = False
-    timesteps: Annotated[int, Field(ge=0)] = 0
-    n_updates: Annotated[int, Field(ge=0)] = 0
+    # Bounded: 10**30 steps passed, and a resume's TensorBoard purge failed on it with a traceback.
+    timesteps: Annotated[int, Field(ge=0, le=MAX_TIMESTEPS)] = 0
+    n_updates: Annotated[int, Field(ge=0, le=MAX_TIMESTEPS)] = 0
     tier: Literal[TIERS] = "flatland"  # type: ignore[valid-type]  # where it trained last
     env_kwargs: dict[str, Any] = {}  # after tier: checked for it
     final_eval: FinalEval | None = None  # written by the runner when the policy's stage ends

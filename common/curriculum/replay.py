@@ -83,6 +83,9 @@ def load_replay(buffer, path: str | Path) -> None:
             for name, array in expected.items():
                 # Its filled rows, or (a file written before only they were) the whole buffer.
                 _read_into(archive, members[name], (array[:rows], array), refuse)
+                # Weights with a NaN are refused as they open; a NaN transition would train them into it.
+                if array.dtype.kind == "f" and not np.isfinite(array[:rows]).all():
+                    raise refuse(f"{name}: holds NaN or infinite values")
     buffer.pos, buffer.full = pos, bool(full)
 
 

@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 from typing import Annotated, Callable
 
+import numpy as np
 import yaml
 from filelock import FileLock, Timeout
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -29,7 +30,7 @@ from common.curriculum.hyperparams import resolve_hyperparams
 from common.curriculum.machine import machine
 from common.curriculum.policy import (DeterministicAction, algorithm_class, load_weights, use_optimizer_kernels,
                                       policy_class, vec_env_class)
-from common.curriculum.policy_file import Normalizer, update_manifest
+from common.curriculum.policy_file import Normalizer, PolicyFile, update_manifest
 from common.curriculum.replay import load_replay
 from common.curriculum.run_directory import (LOCK_NAME, MARKER, EvalLog, StagePaths, check_claimable, clear_unstarted,
                                              is_marked, mark, unstarted, write_json)
@@ -76,6 +77,21 @@ def stage_env_kwargs(stage: StageSpec) -> dict:
     spec = stage.scenarios
     return dict(world=spec.world, observation=stage.observation, reward=stage.reward, max_steps=stage.max_steps,
                 difficulty=spec.difficulty, action_mapping=stage.action_mapping, **stage.env_kwargs)
+
+
+def _env_rng_states(file: PolicyFile, count: int) -> list[dict] | None:
+    """The ``count`` envs' generator states a checkpoint holds (None if it holds none for as
+    many envs: they draw afresh), each checked as a generator takes it."""
+    states = file.raw_manifest.get("env_rng")
+    if not isinstance(states, list) or len(states) != count:
+        return None
+    for state in states:
+        try:
+            np.random.PCG64().state = state
+        except (TypeError, ValueError, KeyError, OverflowError):
+            raise ConfigError(file.path, "nav_manifest.json: env_rng", "not the envs' generator states a run writes; "
+                              "the checkpoint is damaged") from None
+    return states
 
 
 def _is_state(state: object, config: CurriculumConfig) -> bool:
@@ -300,10 +316,9 @@ class Runner:
             normalizer = file.normalizer(venv.observation_space.shape[0]) if file is not None else None
             if normalizer is not None and isinstance(venv, VecNormalize):
                 normalizer.apply_to(venv)
-            states = file.raw_manifest.get("env_rng") if resuming else None
-            if isinstance(states, list) and len(states) == venv.num_envs:
-                for env_index, env_state in enumerate(states):
-                    venv.env_method("restore_rng", env_state, indices=[env_index])
+            states = _env_rng_states(file, venv.num_envs) if resuming else None
+            for env_index, env_state in enumerate(states or ()):
+                venv.env_method("restore_rng", env_state, indices=[env_index])
         use_optimizer_kernels(model, stage.optimizer_kernels)
         already = int(model.num_timesteps)
         self.eval_log.truncate(stage.name, already)
