@@ -27,6 +27,7 @@ Speed = Annotated[float, Field(ge=-MAX_SPEED, le=MAX_SPEED)]
 Acceleration = Annotated[float, Field(gt=0.0, allow_inf_nan=True)]  # inf: no limit, IR-SIM's default
 Fraction = Annotated[float, Field(ge=0.0, le=1.0)]
 MoverSpeed = Annotated[float, Field(ge=-MAX_MOVER_SPEED, le=MAX_MOVER_SPEED)]
+MoverSpeedLimit = Annotated[float, Field(gt=0.0, le=MAX_MOVER_SPEED)]
 Positive = Annotated[float, Field(gt=0.0, le=1e6)]  # a gain, a time or a length scale
 NonNegative = Annotated[float, Field(ge=0.0, le=1e6)]
 

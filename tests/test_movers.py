@@ -252,6 +252,11 @@ def test_people_who_see_the_robot_go_round_it_and_blind_ones_walk_into_it(behavi
     ({"wander": [5.0, 5.0, 11.0, 9.0]}, "obstacles.0.motion.wander: [5.0, 5.0, 11.0, 9.0] reaches outside the world"),
     ({"goals": [[2.0, 1.0]], "behavior": {"name": "teleport"}},
      "obstacles.0.motion.behavior.name: 'teleport'; allowed: dash, rvo, orca, sfm"),
+    # RVO's candidates are a 0.05 m/s grid over the limits: 1e6 asked for petabytes at the first step.
+    ({"goals": [[2.0, 1.0]], "behavior": {"name": "rvo", "vxmax": 1e6}},
+     "obstacles.0.motion.behavior.vxmax: Input should be less than or equal to 10"),
+    ({"goals": [[2.0, 1.0]], "behavior": {"name": "rvo", "acce": 21.0}},
+     "obstacles.0.motion.behavior.acce: Input should be less than or equal to 20"),
 ])
 def test_bad_motions_are_one_line_errors_naming_the_field(motion, message):
     data = {"obstacles": [{"type": "circle", "x": 5.0, "y": 5.0, "radius": 0.3, "motion": motion}]}

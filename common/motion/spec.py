@@ -31,7 +31,8 @@ from typing import Annotated, Literal, Union
 
 from pydantic import Field, model_validator
 
-from common.fields import Acceleration, Coordinate, Frozen, Length, MoverSpeed, NonNegative, Point, Positive
+from common.fields import (MAX_MOVER_SPEED, Acceleration, Coordinate, Frozen, Length, MoverSpeed, MoverSpeedLimit,
+                           NonNegative, Point, Positive)
 
 MAX_GOALS = 1000  # per mover
 Pair = tuple[MoverSpeed, MoverSpeed]
@@ -53,9 +54,11 @@ class Rvo(Frozen):
     ``acce`` of the current one) nearest the desired one outside every neighbour's cone."""
 
     name: Literal["rvo"] = "rvo"
-    vxmax: Positive = 1.5
-    vymax: Positive = 1.5
-    acce: Positive = 1.0  # m/s: how far from the current velocity the candidates reach
+    # Capped: the candidates are a 0.05 m/s grid over ±vxmax x ±vymax within acce, so 1e6 asked for
+    # a grid of petabytes; at the caps, 400 x 400 candidates a step.
+    vxmax: MoverSpeedLimit = 1.5
+    vymax: MoverSpeedLimit = 1.5
+    acce: Annotated[float, Field(gt=0.0, le=2 * MAX_MOVER_SPEED)] = 1.0  # m/s: how far from the current velocity the candidates reach
     factor: NonNegative = 1.0  # weight of the time to collision when every candidate is inside a cone
     mode: Literal["rvo", "hrvo", "vo"] = "rvo"
     neighbor_threshold: Positive = 3.0  # m
