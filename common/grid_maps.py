@@ -24,7 +24,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from common.errors import ConfigError, quote
-from common.fields import Frozen
+from common.fields import MAX_LENGTH, Frozen
 from common.files import read_bytes, regular_file
 from common.irsim_package import import_irsim, quiet_stdout
 from common.params import is_real
@@ -53,6 +53,9 @@ class GridMap(Frozen):
     def _one_source(self) -> "GridMap":
         if (self.image is None) == (self.generator is None):
             raise ValueError("a grid map comes from an image or a generator; allowed: one of image, generator")
+        keys = [key for key, _ in self.generator or ()]
+        if twice := sorted({key for key in keys if keys.count(key) > 1}):
+            raise ValueError(f"generator: {', '.join(map(quote, twice))} given twice; allowed: each key once")
         return self
 
 
@@ -68,7 +71,8 @@ def _image_occupancy(path: str) -> np.ndarray:
             width, height = image.size
         too_large = width * height > MAX_CELLS or max(width, height) > MAX_SIDE
         grid = None if too_large else mpimg.imread(io.BytesIO(data), format=Path(path).suffix.lstrip(".") or None)
-    except (UnidentifiedImageError, Image.DecompressionBombError, OSError, ValueError) as exc:
+    # SyntaxError: PIL's PNG reader, forced by the name, meeting another format (a JPEG named .png).
+    except (UnidentifiedImageError, Image.DecompressionBombError, OSError, ValueError, SyntaxError) as exc:
         # PIL refuses a header of more pixels than its own cap before ours can (a bomb).
         why = str(exc).split(",")[0] if isinstance(exc, Image.DecompressionBombError) else "unreadable image data"
         raise ConfigError(path, "world.obstacle_map", f"{why}; allowed: a PNG or another image of at most "
@@ -160,12 +164,15 @@ OWN_GENERATORS = {"maze": maze_occupancy}
 
 # Each generator's keys: (what is allowed, the check). IR-SIM's own checks come after its work,
 # or never (a fill of 5 indexed out of its array; a resolution of 1e-5 asked for terabytes).
-_POSITIVE = ("a finite number above 0", lambda v: is_real(v) and 0.0 < v < float("inf"))
+# Bounded above as well: 1e-320 m cells or a 1e308 m passage overflowed the cell counts, and a
+# Perlin complexity of 1e300 made NaN noise (an empty map, silently).
+_LENGTH = (f"a length from 0.001 to {MAX_LENGTH:g} m", lambda v: is_real(v) and 0.001 <= v <= MAX_LENGTH)
+_SCALE = ("a number above 0, at most 1000", lambda v: is_real(v) and 0.0 < v <= 1000.0)
 _FRACTION = ("a number from 0 to 1", lambda v: is_real(v) and 0.0 <= v <= 1.0)
 _SEED = ("a whole number from 0, or null", lambda v: v is None or (_is_whole(v) and v >= 0))
 GENERATOR_KEYS: dict[str, dict[str, tuple[str, object]]] = {
-    "maze": {"resolution": _POSITIVE, "passage": _POSITIVE, "loops": _FRACTION, "seed": _SEED},
-    "perlin": {"resolution": _POSITIVE, "complexity": _POSITIVE, "fill": _FRACTION, "attenuation": _POSITIVE,
+    "maze": {"resolution": _LENGTH, "passage": _LENGTH, "loops": _FRACTION, "seed": _SEED},
+    "perlin": {"resolution": _LENGTH, "complexity": _SCALE, "fill": _FRACTION, "attenuation": _SCALE,
                "fractal": ("a whole number from 1 to 16", lambda v: _is_whole(v) and 1 <= v <= 16), "seed": _SEED},
 }
 _REQUIRED = {"maze": ("resolution", "passage", "loops", "seed"), "perlin": ("resolution",)}

@@ -145,7 +145,10 @@ def test_grid_maps_are_refused_in_one_line_where_they_cannot_be_read_or_built(tm
     huge = _image(tmp_path, np.zeros((4100, 4100)), "huge.png")
     with pytest.raises(ConfigError, match=r"world\.obstacle_map: 4100 x 4100 pixels; allowed: at most"):
         read_world_file(_world_file(tmp_path, huge))
+    Image.new("L", (8, 8)).save(tmp_path / "photo.jpg")
+    jpeg = (tmp_path / "photo.jpg").read_bytes()  # PIL's PNG reader, forced by the name, raised SyntaxError on it
     for name, content, problem in (("junk.png", b"not an image", "unreadable image data"),
+                                   ("jpeg.png", jpeg, "unreadable image data"),
                                    ("bomb.png", _png_header(60000, 60000), r"Image size \(3600000000 pixels\) exceeds limit of \d+ pixels")):
         (tmp_path / name).write_bytes(content)
         with pytest.raises(ConfigError, match=rf"world\.obstacle_map: {problem}; allowed: a PNG or another image"):
@@ -189,15 +192,17 @@ PERLIN = {"name": "perlin", "resolution": 0.1, "complexity": 0.12, "fill": 0.32,
 
 @pytest.mark.parametrize("change, field, problem", [
     # IR-SIM would ask for 4e12 cells (terabytes), index out of its array, or overflow after seconds.
-    ({"resolution": 1e-5}, "resolution", "1e-05 m makes 4,000,000,000,000 cells over the 20 x 20 m world; allowed: at most 4,194,304 cells"),
-    ({"resolution": 0}, "resolution", "got 0; allowed: a finite number above 0"),
-    ({"resolution": -1}, "resolution", "got -1; allowed: a finite number above 0"),
+    ({"resolution": 1e-3}, "resolution", "0.001 m makes 400,000,000 cells over the 20 x 20 m world; allowed: at most 4,194,304 cells"),
+    ({"resolution": 0}, "resolution", "got 0; allowed: a length from 0.001 to 1000 m"),
+    ({"resolution": -1}, "resolution", "got -1; allowed: a length from 0.001 to 1000 m"),
+    ({"resolution": 1e-320}, "resolution", "got 1e-320; allowed: a length from 0.001 to 1000 m"),  # overflowed the cell count
+    ({"complexity": 1e300}, "complexity", "got 1e+300; allowed: a number above 0, at most 1000"),  # NaN noise, an empty map
     ({"fill": 5}, "fill", "got 5; allowed: a number from 0 to 1"),
     ({"fractal": 100000}, "fractal", "got 100000; allowed: a whole number from 1 to 16"),
     # Noise is computed over every cell once per octave: 16 octaves of the largest grid ran for minutes.
     ({"resolution": 0.01, "fractal": 2}, "fractal", "2 octaves over 4,000,000 cells; allowed: at most 4,194,304 cells times octaves"),
-    ({"complexity": float("nan")}, "complexity", "got nan; allowed: a finite number above 0"),
-    ({"complexity": "abc"}, "complexity", "got 'abc'; allowed: a finite number above 0"),
+    ({"complexity": float("nan")}, "complexity", "got nan; allowed: a number above 0, at most 1000"),
+    ({"complexity": "abc"}, "complexity", "got 'abc'; allowed: a number above 0, at most 1000"),
     ({"seed": -3}, "seed", "got -3; allowed: a whole number from 0, or null"),
     ({"bogus": 48}, "bogus", "unknown key of the perlin generator; allowed: resolution, complexity, fill, attenuation, fractal, seed"),
     ({"resolution": None}, "resolution", "missing; the perlin generator needs resolution"),
@@ -218,6 +223,14 @@ def test_a_project_files_maze_spec_is_checked_by_its_own_keys(tmp_path):
     path.write_text("start: [1, 1, 0]\ngoal: [8, 8]\n"
                     "grid_map: {generator: [[name, maze], [resolution, 0.1], [passage, 1.0], [loops, 2], [seed, 1]]}\n")
     with pytest.raises(ConfigError, match=r"maze\.yaml: grid_map\.generator\.loops: got 2; allowed: a number from 0 to 1$"):
+        load_scenario(path)
+    path.write_text("start: [1, 1, 0]\ngoal: [8, 8]\ngrid_map: {generator: [[name, maze], [resolution, 0.1], "
+                    "[passage, 1.0e+308], [loops, 0.1], [seed, 1]]}\n")  # overflowed the maze's lattice
+    with pytest.raises(ConfigError, match=r"grid_map\.generator\.passage: got 1e\+308; allowed: a length from 0\.001"):
+        load_scenario(path)
+    path.write_text("start: [1, 1, 0]\ngoal: [8, 8]\ngrid_map: {generator: [[name, maze], [resolution, 0.1], "
+                    "[passage, 1.0], [loops, 0.1], [seed, 1], [seed, 2]]}\n")  # the last seed won, silently
+    with pytest.raises(ConfigError, match=r"grid_map: generator: 'seed' given twice; allowed: each key once$"):
         load_scenario(path)
 
 
