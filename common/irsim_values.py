@@ -11,7 +11,7 @@ import numpy as np
 from pydantic import BaseModel, ValidationError
 
 from common.errors import ConfigError, did_you_mean, quote
-from common.scenario import pydantic_error
+from common.scenario import pydantic_error, refuse_misread
 
 
 class Value(NamedTuple):
@@ -135,7 +135,14 @@ def fit3(values: list[float]) -> tuple[float, float, float]:
 
 
 def build_model(model: type[BaseModel], path: str, fields: dict[str, Value]) -> Any:
-    """Validate a model; a pydantic error names the IR-SIM field it came from."""
+    """Validate a model; a pydantic error, or a value pydantic would misread (true or "0.7" for
+    a number: :func:`~common.scenario.refuse_misread`), names the IR-SIM field it came from."""
+    for name, item in fields.items():
+        try:
+            refuse_misread({name: item.value}, model)
+        except ConfigError as error:
+            rest = (error.field or "").partition(".")[2]
+            raise fail(_within(item.path, rest), error.problem) from None
     try:
         return model(**{name: item.value for name, item in fields.items()})
     except ValidationError as exc:

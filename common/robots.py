@@ -38,9 +38,9 @@ def robot_profile(value: str | dict[str, Any] | RobotProfile, field: str = "robo
     if isinstance(value, dict):
         from pydantic import ValidationError
 
-        from common.scenario import pydantic_error, refuse_booleans
+        from common.scenario import pydantic_error, refuse_misread
 
-        refuse_booleans(value, RobotProfile, None, field)
+        refuse_misread(value, RobotProfile, None, field)
         try:
             return RobotProfile.model_validate(value)
         except ValidationError as exc:

@@ -676,37 +676,76 @@ def pydantic_error(source: str | Path | None, error: ValidationError, model: typ
     return ConfigError(source, field, message)
 
 
+def _kinds_of(annotation: Any) -> set[str]:
+    """What a value of ``annotation`` may be, as a person writes it: "flag", "number", "text" or
+    "other" (a mapping or anything else)."""
+    if annotation is bool:
+        return {"flag"}
+    if annotation in (int, float):
+        return {"number"}
+    if annotation is str:
+        return {"text"}
+    if annotation is type(None):
+        return set()
+    if typing.get_origin(annotation) is Annotated:
+        return _kinds_of(typing.get_args(annotation)[0])
+    if typing.get_origin(annotation) is Literal:
+        return {"flag" if isinstance(v, bool) else "number" if isinstance(v, (int, float)) else "text"
+                for v in typing.get_args(annotation)}
+    args = typing.get_args(annotation)
+    if typing.get_origin(annotation) is dict or not args:
+        return {"other"}
+    return set().union(*(_kinds_of(arg) for arg in args))
+
+
 @functools.cache
-def _flag_keys(model: type[BaseModel]) -> frozenset[str]:
-    """The names of the true/false fields of ``model`` and every model its fields hold."""
-    keys, seen, stack = set(), set(), [model]
+def _key_kinds(model: type[BaseModel]) -> dict[str, frozenset[str]]:
+    """For each field name of ``model`` and every model its fields hold, what its value may be
+    (:func:`_kinds_of`), over every model that has a field of that name."""
+    kinds: dict[str, set[str]] = {}
+    seen, stack = set(), [model]
     while stack:
         current = stack.pop()
         if current in seen:
             continue
         seen.add(current)
         for name, info in current.model_fields.items():
-            if info.annotation is bool or bool in typing.get_args(info.annotation):
-                keys.add(name)
+            kinds.setdefault(name, set()).update(_kinds_of(info.annotation))
             stack.extend(_models_in(info.annotation))
-    return frozenset(keys)
+    return {name: frozenset(kind) for name, kind in kinds.items()}
 
 
-def refuse_booleans(data: Any, model: type[BaseModel], source: str | Path | None = None, field: str = "") -> None:
-    """A one-line error for true or false under a key of ``data`` (a person's mapping for ``model``)
-    that is not one of its flags: pydantic reads true as 1 (``width: true`` made a 1 m world).
-    One pass over what a person wrote, not a validator on every number: generated scenarios, made
-    at every reset, hold no booleans. A grid map generator's own parameters may be anything."""
-    flags = _flag_keys(model)
+def _is_numeral(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def refuse_misread(data: Any, model: type[BaseModel], source: str | Path | None = None, field: str = "") -> None:
+    """A one-line error for a value of ``data`` (a person's mapping for ``model``) that pydantic
+    would read as something else: true or false where a number belongs (``width: true`` made a
+    1 m world), a quoted number ("0.5"), or anything but true or false where a flag belongs
+    (``walls: 0`` read as false). One pass over what a person wrote, not a validator on every
+    number: generated scenarios, made at every reset, hold none of these. A grid map generator's
+    own parameters are checked by its own rules."""
+    kinds = _key_kinds(model)
 
     def walk(value: Any, path: tuple) -> None:
-        if isinstance(value, bool) and path and path[-1] not in flags:
-            name = ".".join(str(part) for part in (field, *path) if part != "")
+        key = next((part for part in reversed(path) if isinstance(part, str)), None)
+        allowed = kinds.get(key, frozenset({"other"})) if key is not None else frozenset({"other"})
+        name = ".".join(str(part) for part in (field, *path) if part != "")
+        if isinstance(value, bool) and "flag" not in allowed and path:
             raise ConfigError(source, name, f"got {str(value).lower()}; allowed: a number")
+        if isinstance(value, str) and "number" in allowed and "text" not in allowed and _is_numeral(value):
+            raise ConfigError(source, name, f"got {quote(value)} (quoted); allowed: a number")
+        if allowed == {"flag"} and not isinstance(value, bool):
+            raise ConfigError(source, name, f"got {quote(value)}; allowed: true or false")
         if isinstance(value, dict):
-            for key, item in value.items():
-                if key != "generator":
-                    walk(item, (*path, key))
+            for item_key, item in value.items():
+                if item_key != "generator":
+                    walk(item, (*path, item_key))
         elif isinstance(value, (list, tuple)):
             for index, item in enumerate(value):
                 walk(item, (*path, index))
@@ -716,7 +755,7 @@ def refuse_booleans(data: Any, model: type[BaseModel], source: str | Path | None
 
 def scenario_from_mapping(data: dict, source: str | Path | None = None) -> Scenario:
     """Validate a mapping as a scenario (schema and geometry)."""
-    refuse_booleans(data, Scenario, source)
+    refuse_misread(data, Scenario, source)
     try:
         scenario = Scenario.model_validate(data)
     except ValidationError as exc:

@@ -466,6 +466,12 @@ ERRORS = [
      "obstacle.distribution", "less than or equal to 10000"),
     ("irsim: 3\n", "irsim", "expected a mapping"),
     ("irsim: {robot: {kinematics: {name: diff}}, extra: 1}\n", "irsim.extra", "unknown key"),
+    # A behaviour's parameters were read by pydantic alone: true as 1, "0.7" as 0.7.
+    (ROBOT + "obstacle: [{shape: {name: circle, radius: 0.3}, kinematics: {name: omni}, state: [5, 5, 0], "
+             "goal: [6, 6, 0], behavior: {name: sfm, vmax: true}}]\n", "obstacle[0].behavior.vmax", "got true; allowed: a number"),
+    (ROBOT + "obstacle: [{shape: {name: circle, radius: 0.3}, kinematics: {name: omni}, state: [5, 5, 0], "
+             "goal: [6, 6, 0], behavior: {name: rvo, vxmax: '0.7'}}]\n", "obstacle[0].behavior.vxmax",
+     "got '0.7' (quoted); allowed: a number"),
 ]
 
 

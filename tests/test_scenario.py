@@ -400,17 +400,34 @@ def test_a_static_obstacle_wholly_outside_the_walled_world_is_refused(tmp_path):
         assert len(load_scenario(tmp_path / "s.yaml").obstacles) == 1
 
 
-@pytest.mark.parametrize("text, field", [("world: {width: true}\n", "world.width"),
-                                         ("start: [1, true, 0]\n", "start.1"),
-                                         ("robot: {radius: false}\n", "robot.radius"),
-                                         ("lidar: {beams: true}\n", "lidar.beams")])
-def test_a_boolean_where_a_number_belongs_is_refused_not_read_as_one_or_zero(tmp_path, text, field):
+@pytest.mark.parametrize("text, field, allowed", [
+    ("world: {width: true}\n", "world.width", "a number"),
+    ("start: [1, true, 0]\n", "start.1", "a number"),
+    ("robot: {radius: false}\n", "robot.radius", "a number"),
+    ("lidar: {beams: true}\n", "lidar.beams", "a number"),
+    # Quoted numbers and flags that are not true or false were read as what they look like.
+    ("world: {width: '10'}\n", "world.width", "a number"),
+    ("start: ['1', 1, 0]\n", "start.0", "a number"),
+    ("lidar: {beams: '36'}\n", "lidar.beams", "a number"),
+    ("obstacles: [{type: circle, x: 5, y: 5, radius: '0.5'}]\n", "obstacles.0.radius", "a number"),
+    ("obstacles: [{type: circle, x: 5, y: 5, radius: 0.3, motion: {goals: [['6', 6]]}}]\n", "obstacles.0.motion.goals.0.0",
+     "a number"),
+    ("world: {walls: 0}\n", "world.walls", "true or false"),
+    ("lidar: {repeat_end_beam: 1}\n", "lidar.repeat_end_beam", "true or false"),
+    ("obstacles: [{type: circle, x: 5, y: 5, radius: 0.3, unobstructed: 'yes'}]\n", "obstacles.0.unobstructed",
+     "true or false"),
+])
+def test_a_value_pydantic_would_misread_is_refused(tmp_path, text, field, allowed):
     from common.scenario import load_scenario
 
     (tmp_path / "s.yaml").write_text("start: [1, 1, 0]\ngoal: [8, 8]\n" + text if "start" not in text
                                      else text + "goal: [8, 8]\n")
-    with pytest.raises(ConfigError, match=rf"s\.yaml: {re.escape(field)}: .*allowed: a number"):
+    with pytest.raises(ConfigError, match=rf"s\.yaml: {re.escape(field)}: .*; allowed: {allowed}$"):
         load_scenario(tmp_path / "s.yaml")
+    # Text where text belongs stays text, even when it reads as a number (a group's name).
+    (tmp_path / "t.yaml").write_text("start: [1, 1, 0]\ngoal: [8, 8]\nobstacles: [{type: circle, x: 5, y: 5, "
+                                     "radius: 0.3, motion: {goals: [[6, 6]], group: '2', behavior: {name: orca}}}]\n")
+    assert load_scenario(tmp_path / "t.yaml").obstacles[0].motion.group == "2"
 
 
 @pytest.mark.parametrize("text, expected", [
