@@ -86,8 +86,16 @@ def build(scenario: Scenario, client: int) -> Warehouse:
     world = scenario.world
     x0, y0 = world.offset
     centre = (x0 + 0.5 * world.width, y0 + 0.5 * world.height)
-    floor = _box(client, (centre[0], centre[1], -0.05), (0.5 * world.width + FLOOR_MARGIN,
-                 0.5 * world.height + FLOOR_MARGIN, 0.05), 0.0, _COLOURS["floor"])
+    half = (0.5 * world.width + FLOOR_MARGIN, 0.5 * world.height + FLOOR_MARGIN, 0.05)
+    if world.walls:
+        floor = _box(client, (centre[0], centre[1], -0.05), half, 0.0, _COLOURS["floor"])
+    else:
+        # Nothing keeps the robot in a world without walls (IR-SIM's): it drove off the floor's edge
+        # and fell for the rest of the episode. Its floor collides as an endless plane at z = 0, as
+        # flatland's has no edge; it is drawn as the walled floor is.
+        plane = p.createCollisionShape(p.GEOM_PLANE, collisionFramePosition=(0.0, 0.0, 0.05), physicsClientId=client)
+        visual = p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=_COLOURS["floor"], physicsClientId=client)
+        floor = _body(client, plane, visual, (centre[0], centre[1], -0.05), 0.0)
     p.changeDynamics(floor, -1, lateralFriction=FLOOR_FRICTION, physicsClientId=client)
     warehouse = Warehouse(floor, {floor: Tag("floor")})
     if world.walls:

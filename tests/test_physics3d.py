@@ -689,3 +689,20 @@ def test_importing_the_tier_prints_nothing():
     and of its one-line errors."""
     result = subprocess.run([sys.executable, "-c", "import physics3d"], capture_output=True, text=True, timeout=120)
     assert result.returncode == 0 and result.stdout == "" and result.stderr == ""
+
+
+def test_a_robot_leaving_a_world_without_walls_drives_on_the_floor():
+    """The floor ended a metre past the world: in a world without walls (IR-SIM's) the robot drove
+    off its edge and fell for the rest of the episode, the env stepping on as if nothing happened."""
+    from common.scenario import Scenario, WorldSpec
+
+    env = gym.make("physics3d/WarehouseNav-v0", world=Scenario(world=WorldSpec(walls=False), start=(9.0, 5.0, 0.0),
+                                                                goal=(5.0, 5.0)))
+    env.reset(seed=0)
+    world = env.unwrapped.world
+    height = p.getBasePositionAndOrientation(world.robot.id, physicsClientId=world.client)[0][2]
+    for _ in range(150):  # about 7 m beyond the world's edge
+        env.step(np.array([1.0, 0.0], dtype=np.float32))
+    (x, _, z), _ = p.getBasePositionAndOrientation(world.robot.id, physicsClientId=world.client)
+    assert x > 15.0 and abs(z - height) < 0.01
+    env.close()
