@@ -238,3 +238,15 @@ def test_what_a_copy_would_share_refuses_to_be_copied():
     twin = copy.deepcopy(plain)
     action = np.array([1.0, 0.2], dtype=np.float32)
     assert all(np.array_equal(plain.step(action)[0], twin.step(action)[0]) for _ in range(5))
+    # Among movers too: the copy's people walked on in its world while its readings and lidar kept
+    # them where they stood when it was copied (views of packed arrays, each copied on its own).
+    crowd = gym.make("flatland/Nav-v0", world="crowd", observation="lidar43_log")
+    crowd.reset(seed=0)
+    twin = copy.deepcopy(crowd)
+    still = np.array([-1.0, 0.0], dtype=np.float32)
+    first = crowd.unwrapped.readings.movers.rows.copy()
+    for _ in range(30):
+        assert np.array_equal(crowd.step(still)[0], twin.step(still)[0])
+        assert np.array_equal(crowd.unwrapped.readings.movers.rows, twin.unwrapped.readings.movers.rows)
+    assert not np.array_equal(twin.unwrapped.readings.movers.rows[:, :2], first[:, :2])  # they walked
+    assert not crowd.unwrapped.readings.movers.rows.flags.writeable  # a snapshot, as the readings' lidar

@@ -12,6 +12,7 @@ make the movers' step inside its own kernel instead: :meth:`Movers.begin`, the c
 
 from __future__ import annotations
 
+import copy
 import functools
 import math
 
@@ -24,6 +25,7 @@ from common.irsim_geometry import circle_outline, rectangle_outline
 from common.kernel_cache import compiled_for
 from common.motion.rvo import rvo_velocity
 from common.motion.packing import pack
+from common.readings import frozen
 from common.motion.step import (
     COLLISION_MODES, PACKED_BOX_ROWS, PACKED_BOXES, PACKED_CIRCLE_ROWS, PACKED_CIRCLES, PACKED_F, PACKED_GOALS, PACKED_I,
     PACKED_MEMBERS, PACKED_MOVING, PACKED_NEIGHBORS, PACKED_OBJECTS, PACKED_OUTLINE, PACKED_OUTLINES, PACKED_PARAMS,
@@ -152,6 +154,16 @@ class Movers:
         self._packed = (floats, float_layout, ints, int_layout, t.orca_velocity, self._inside, t.irsim, self._dt,
                         self._python, self._mode)
 
+    def __deepcopy__(self, memo: dict) -> "Movers":
+        # The arrays the compiled step writes are views of the two packed buffers; a deep copy
+        # makes each view an array of its own, which the copy's steps never wrote (its states and
+        # lidar rows stood still while its movers moved). The copy packs them again.
+        twin = object.__new__(type(self))
+        memo[id(self)] = twin
+        twin.__dict__.update(copy.deepcopy(self.__dict__, memo))
+        twin._pack(twin.table)
+        return twin
+
     def reset(self, pose: tuple[float, float, float], rng: np.random.Generator) -> None:
         """Every mover back at its start with its first goal and its first command; the robot at
         ``pose``, at rest; the groups' plans for the first step. A wanderer without goals draws
@@ -278,7 +290,7 @@ class Movers:
 
     def states(self) -> MoverStates:
         """The movers' poses, velocities and sizes now (the controlled robot's own row left out)."""
-        return MoverStates(self._states.copy(), self.labels)
+        return MoverStates(frozen(self._states.copy()), self.labels)
 
     def visible(self) -> tuple[np.ndarray, np.ndarray]:
         """What a lidar sees of the movers now: circles (x, y, r) and boxes (x, y, cos, sin, half
