@@ -166,6 +166,38 @@ def _nan_weight(model) -> None:
     first.CopyFrom(numpy_helper.from_array(values, first.name))
 
 
+def _unfilled_weight(model) -> None:
+    """A weight whose declared shape its data does not fill (numpy's reshape raised a traceback)."""
+    first = model.graph.initializer[0]
+    del first.dims[:]
+    first.dims.extend([2**31, 2**31])
+    first.ClearField("raw_data")
+
+
+def _reused_weight(nodes: int):
+    """``nodes`` MatMuls of one 1024 x 1024 weight in a chain: seconds an action from a 4 MB file."""
+    def change(model) -> None:
+        from onnx import helper, numpy_helper
+
+        model.graph.initializer.append(numpy_helper.from_array(np.zeros((1024, 1024), np.float32), "square"))
+        model.graph.initializer.append(numpy_helper.from_array(np.zeros((43, 1024), np.float32), "widen"))
+        names = ["observation"] + [f"h{k}" for k in range(nodes + 1)]
+        model.graph.node.append(helper.make_node("MatMul", ["observation", "widen"], ["h0"]))
+        for k in range(nodes):
+            model.graph.node.append(helper.make_node("MatMul", [names[k + 1], "square"], [names[k + 2]]))
+    return change
+
+
+def _broadcast(model) -> None:
+    """Add of (batch, 1, N) and (N, 1): (batch, N, N) values, gigabytes from a file of megabytes."""
+    from onnx import helper, numpy_helper
+
+    model.graph.initializer.append(numpy_helper.from_array(np.zeros((32768, 1), np.float32), "column"))
+    model.graph.initializer.append(numpy_helper.from_array(np.zeros((43, 32768), np.float32), "row"))
+    model.graph.node.append(helper.make_node("MatMul", ["observation", "row"], ["wide"]))
+    model.graph.node.append(helper.make_node("Add", ["wide", "column"], ["square"]))
+
+
 def _export_record(**change):
     record = {"format": 1, "observation_size": 43, "normaliser_folded_in": False, "input": "observation",
               "output": "action"}
@@ -195,6 +227,15 @@ def _export_record(**change):
     ("an external weight", lambda source, target: _rewritten(source, target, _external_weight),
      "graph weight 'beside'", "stored outside the file"),
     ("a NaN weight", lambda source, target: _rewritten(source, target, _nan_weight), "graph weight", "not finite"),
+    # Each of these ended in a traceback, or ran for as long or built a tensor as large as the file said.
+    ("an unfilled weight", lambda source, target: _rewritten(source, target, _unfilled_weight), "graph weight",
+     "its data does not fill its declared shape and type"),
+    ("too many operators", lambda source, target: _rewritten(source, target, _reused_weight(300)), "graph",
+     "308 operators; allowed: at most 256"),
+    ("a weight reused", lambda source, target: _rewritten(source, target, _reused_weight(20)), "graph",
+     "multiply-adds an action; allowed: at most 16,777,216"),
+    ("a broadcast", lambda source, target: _rewritten(source, target, _broadcast), "graph tensor 'square'",
+     "1,073,741,824 values for one observation; allowed: at most 1,048,576"),
     ("a garbled export record", lambda source, target: _rewritten(source, target, _export_record(normaliser_folded_in="banana")),
      "nav_onnx: normaliser_folded_in", "Input should be a valid boolean"),
     ("another observation size", lambda source, target: _rewritten(source, target, _export_record(observation_size=99)),
@@ -234,7 +275,11 @@ def test_the_cli_exports_scores_the_onnx_file_as_the_zip_and_refuses_bad_input_w
     assert main(["eval", "--policy", str(out), "--suite", "sparse", "--episodes", "6", "--json", "--jobs", "2"]) == 0
     assert json.loads(capsys.readouterr().out) == scores[1]
     (tmp_path / "folder.onnx").mkdir()
+    named_onnx = tmp_path / "policy.onnx"  # a policy zip named .onnx: its export replaced it
+    named_onnx.write_bytes(zip_path.read_bytes())
     for argv, expected in ((["export", str(ROOT / "README.md"), "--onnx", str(tmp_path / "x.onnx")], "README.md"),
+                           (["export", str(named_onnx), "--onnx", str(tmp_path / "." / "policy.onnx")],
+                            "is the policy being exported; allowed: another path"),
                            (["export", str(zip_path), "--onnx", str(tmp_path / "x.zip")], "ending in .onnx"),
                            (["export", str(zip_path), "--onnx", str(tmp_path / "folder.onnx")],
                             "folder.onnx' is a directory; allowed: the path of the .onnx file to write"),
@@ -243,6 +288,7 @@ def test_the_cli_exports_scores_the_onnx_file_as_the_zip_and_refuses_bad_input_w
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and expected in err and ".tmp" not in err, err
     assert not (tmp_path / "x.onnx").exists() and not any((tmp_path / "folder.onnx").iterdir())
+    assert named_onnx.read_bytes() == zip_path.read_bytes()
 
 
 def _example_loop() -> str:

@@ -60,6 +60,8 @@ def export_onnx(policy_path: str | Path, out_path: str | Path) -> Path:
         raise ConfigError(None, "--onnx", f"{str(out_path)!r}: expected a file name ending in .onnx")
     if out_path.is_dir():
         raise ConfigError(None, "--onnx", f"{str(out_path)!r} is a directory; allowed: the path of the .onnx file to write")
+    if out_path.resolve() == Path(policy_path).resolve():  # a policy named .onnx was replaced by its own export
+        raise ConfigError(None, "--onnx", f"{str(out_path)!r} is the policy being exported; allowed: another path")
     missing = [name for name in ("onnx", "onnxscript") if importlib.util.find_spec(name) is None]
     if missing:
         raise ConfigError(None, "--onnx", f"exporting needs {' and '.join(missing)} (torch's exporter): "

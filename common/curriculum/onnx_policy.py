@@ -23,6 +23,7 @@ metadata promises. Checking the graph needs the ``onnx`` package beside onnxrunt
 from __future__ import annotations
 
 import json
+import math
 import tempfile
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -44,6 +45,9 @@ INPUT, OUTPUT = "observation", "action"
 ACTION_SIZE = 2
 MAX_ONNX_BYTES = 64 * 1024 * 1024  # as a policy zip: a network of 16 M float32 parameters
 EXPECTED = "an ONNX policy written by `curriculum export`"
+MAX_NODES = 256
+MAX_ELEMENTS = 2**20  # values of one tensor, for one observation (a 256-wide layer holds 256)
+MAX_WORK = 2**24  # multiply-adds an action (a 256 x 256 actor: about 80,000)
 OPERATORS = frozenset({"Gemm", "MatMul", "Add", "Sub", "Mul", "Div", "Clip", "Tanh", "Relu", "Elu", "LeakyRelu",
                        "Gelu", "Sigmoid", "Identity"})
 """The operators of an exported actor: torch's exporter writes Gemm and the activation (every
@@ -132,13 +136,49 @@ class OnnxPolicy:
                                   f"allowed: {', '.join(sorted(OPERATORS))} (what `curriculum export` writes)")
         if graph.sparse_initializer or model.functions:
             raise ConfigError(self.path, "graph", f"sparse weights or functions; not {EXPECTED}")
+        if len(graph.node) > MAX_NODES:
+            raise ConfigError(self.path, "graph", f"{len(graph.node):,} operators; allowed: at most {MAX_NODES} "
+                              "(an exported actor has a few dozen)")
         for tensor in graph.initializer:
             if tensor.data_location == TensorProto.EXTERNAL or tensor.external_data:
                 raise ConfigError(self.path, f"graph weight {tensor.name!r}", "stored outside the file; allowed: "
                                   "weights inside it (as `curriculum export` writes them)")
-            values = numpy_helper.to_array(tensor)
+            try:
+                values = numpy_helper.to_array(tensor)
+            except (ValueError, TypeError, KeyError):  # a shape its data does not fill, an unknown element type
+                raise ConfigError(self.path, f"graph weight {tensor.name!r}", "its data does not fill its declared "
+                                  "shape and type; refused") from None
             if values.dtype.kind == "f" and not np.isfinite(values).all():
                 raise ConfigError(self.path, f"graph weight {tensor.name!r}", "holds a value that is not finite; refused")
+        self._check_work(model)
+
+    def _check_work(self, model: Any) -> None:
+        """Every tensor the graph computes for one observation holds at most :data:`MAX_ELEMENTS`
+        values and its products take at most :data:`MAX_WORK` multiply-adds, by ONNX's shape
+        inference: a few operators reusing one large weight took seconds an action, and Add
+        broadcasting (1, N) against (N, 1) built N x N values (gigabytes)."""
+        from onnx import shape_inference
+
+        try:
+            inferred = shape_inference.infer_shapes(model, strict_mode=True).graph
+        except Exception as exc:  # onnx's InferenceError and its kin
+            raise ConfigError(self.path, "graph", f"its shapes do not follow from its input ({type(exc).__name__}); "
+                              "refused") from None
+        sizes: dict[str, list[int]] = {}
+        for info in [*inferred.input, *inferred.value_info, *inferred.output]:
+            dims = info.type.tensor_type.shape.dim
+            if not all(d.HasField("dim_value") or d.HasField("dim_param") for d in dims):
+                raise ConfigError(self.path, f"graph tensor {info.name!r}", "of a size shape inference cannot tell; refused")
+            sizes[info.name] = shape = [d.dim_value if d.HasField("dim_value") else 1 for d in dims]  # a batch of one
+            if math.prod(shape) > MAX_ELEMENTS:
+                raise ConfigError(self.path, f"graph tensor {info.name!r}", f"{math.prod(shape):,} values for one "
+                                  f"observation; allowed: at most {MAX_ELEMENTS:,}")
+        for tensor in inferred.initializer:
+            sizes[tensor.name] = list(tensor.dims)
+        work = sum(math.prod(sizes.get(node.output[0], [0])) * (sizes.get(node.input[0]) or [1])[-1]
+                   for node in inferred.node if node.op_type in ("Gemm", "MatMul"))
+        if work > MAX_WORK:
+            raise ConfigError(self.path, "graph", f"{work:,} multiply-adds an action; allowed: at most {MAX_WORK:,}")
 
     def _validated(self, model: type[BaseModel], data: dict, key: str) -> Any:
         """``data`` (the metadata entry ``key``) as ``model``, or its first problem in one line."""
@@ -175,7 +215,10 @@ class OnnxPolicy:
         (the actor is deterministic: ``deterministic`` is accepted for that call's sake)."""
         obs = np.asarray(observation, dtype=np.float32)
         single = obs.ndim == 1
-        actions = self._session.run(None, {INPUT: obs[None] if single else obs})[0]
+        try:
+            actions = self._session.run(None, {INPUT: obs[None] if single else obs})[0]
+        except Exception as exc:  # onnxruntime's Fail (a buffer it could not allocate), RuntimeException...
+            raise ConfigError(self.path, None, f"onnxruntime could not run it ({type(exc).__name__}); refused") from None
         return (actions[0] if single else actions), None
 
 
