@@ -25,7 +25,6 @@ from common.irsim_geometry import circle_outline, rectangle_outline
 from common.kernel_cache import compiled_for
 from common.motion.rvo import rvo_velocity
 from common.motion.packing import pack
-from common.readings import frozen
 from common.motion.step import (
     COLLISION_MODES, PACKED_BOX_ROWS, PACKED_BOXES, PACKED_CIRCLE_ROWS, PACKED_CIRCLES, PACKED_F, PACKED_GOALS, PACKED_I,
     PACKED_MEMBERS, PACKED_MOVING, PACKED_NEIGHBORS, PACKED_OBJECTS, PACKED_OUTLINE, PACKED_OUTLINES, PACKED_PARAMS,
@@ -290,7 +289,9 @@ class Movers:
 
     def states(self) -> MoverStates:
         """The movers' poses, velocities and sizes now (the controlled robot's own row left out)."""
-        return MoverStates(frozen(self._states.copy()), self.labels)
+        states = self._states.copy()
+        states.setflags(write=False)  # a snapshot, as the readings' lidar
+        return MoverStates(states, self.labels)
 
     def visible(self) -> tuple[np.ndarray, np.ndarray]:
         """What a lidar sees of the movers now: circles (x, y, r) and boxes (x, y, cos, sin, half
