@@ -51,8 +51,9 @@ def _behavior(motion: Motion) -> dict[str, Any]:
         out.update(wander=True, range_low=[x0, y0, -math.pi], range_high=[x1, y1, math.pi])
     elif motion.route != "once":
         out["loop"] = True
-    if not motion.reacts_to_robot:
-        out["target_roles"] = "obstacle"
+    roles = motion.target_roles if motion.reacts_to_robot else "obstacle"  # blind to the robot: obstacles only
+    if roles != "all":
+        out["target_roles"] = roles  # "robot" was once dropped: the movers then avoided everyone
     return out
 
 
@@ -132,6 +133,12 @@ def _group(members: list) -> dict[str, Any]:
 def scenario_to_irsim(scenario: Scenario) -> dict[str, Any]:
     """The IR-SIM world mapping of a scenario (dump it with ``yaml.safe_dump``)."""
     world, robot, lidar = scenario.world, scenario.robot, scenario.lidar
+    # What IR-SIM has no model of is refused, not dropped (its poses parted from flatland's by
+    # centimetres within 20 steps, without a word).
+    if robot.encoder_noise > 0:
+        raise ConfigError(None, "robot.encoder_noise", "IR-SIM's robot has no wheel encoders; allowed: 0")
+    if world.integrator != "euler":
+        raise ConfigError(None, "world.integrator", "IR-SIM moves its robot by Euler steps; allowed: euler")
     if robot.shape == "circle":
         shape = {"name": "circle", "radius": robot.radius, "center": [robot.footprint_offset, 0.0]}
     elif robot.shape == "polygon":

@@ -95,3 +95,20 @@ def test_what_irsim_cannot_say_is_one_line():
         scenario_to_irsim(scenario.model_copy(update={"obstacles": [driver]}))
     blind = driver.model_copy(update={"motion": driver.motion.model_copy(update={"reacts_to_robot": False})})
     assert "yield_distance" not in str(scenario_to_irsim(scenario.model_copy(update={"obstacles": [blind]})))
+    # Dropped without a word, each parted IR-SIM's poses from flatland's by centimetres in 20 steps.
+    noisy = scenario.model_copy(update={"robot": scenario.robot.model_copy(update={"encoder_noise": 0.2})})
+    with pytest.raises(ConfigError, match="robot.encoder_noise: IR-SIM's robot has no wheel encoders; allowed: 0"):
+        scenario_to_irsim(noisy)
+    exact = scenario.model_copy(update={"world": scenario.world.model_copy(update={"integrator": "exact"})})
+    with pytest.raises(ConfigError, match="world.integrator: IR-SIM moves its robot by Euler steps; allowed: euler"):
+        scenario_to_irsim(exact)
+
+
+@pytest.mark.parametrize("roles", ["all", "robot", "obstacle"])
+def test_whom_a_mover_avoids_reads_back(roles, tmp_path):
+    """target_roles: robot was written as nothing (all): IR-SIM's own moving files then ran, under
+    --world irsim, with movers that avoided every object instead of the robot alone."""
+    mover = CircleObstacle(x=5.0, y=5.0, radius=0.2, motion=Motion(goals=[(6.0, 5.0)], target_roles=roles))
+    scenario = generate("open", 0).model_copy(update={"obstacles": [mover]})
+    back = parse_irsim(scenario_to_irsim(scenario), source=tmp_path / "w.yaml")
+    assert back.movers[0].motion.target_roles == roles
