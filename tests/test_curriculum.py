@@ -116,6 +116,8 @@ def _with(change: dict, stage: dict | None = None) -> dict:
      "got 'maybe'; allowed: true or false"),
     (_with({}, {"hyperparams": {"clip_range_vf": "abc"}}), "stages.0.hyperparams.clip_range_vf", "'lin_<number>'"),
     (_with({}, {"hyperparams": {"sde_sample_freq": -2}}), "stages.0.hyperparams.sde_sample_freq", "whole number >= -1"),
+    (_with({}, {"n_envs": 1, "hyperparams": {"n_steps": 1}}), "stages.0.hyperparams.n_steps",
+     "allowed: n_steps x n_envs of at least 2"),
     (_with({}, {"hyperparams": {"rollout_buffer_class": "x"}}), "stages.0.hyperparams.rollout_buffer_class",
      "takes code (a class or its arguments), which a curriculum does not name; allowed: batch_size,"),
     (_with({}, {"algorithm": "sac", "hyperparams": {"replay_buffer_kwargs": {"foo": 1}}}),

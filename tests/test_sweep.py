@@ -205,6 +205,9 @@ SPACES = [
                                            "(stages.0.n_envs: Input should be a valid integer"),
     ("stages.0.max_steps: {choice: [60, 1.0e+9]}", "stages.0.max_steps: choice value 1000000000.0 is not valid"),
     ("stages.3.budget: {randint: [1, 5]}", "stages.3.budget: stages is a list of 1; allowed: an index from 0 to 0"),
+    # Read as index 0 too: two parameters set one value, the trial recording one never used.
+    ("stages.0.budget: {randint: [1, 5]}\nstages.00.budget: {randint: [6, 9]}",
+     "stages.00.budget: stages is a list of 1; allowed: an index from 0 to 0"),
     ("stages.0.name.x: {choice: [1]}", "stages.0.name.x: stages.0.name is 'open', not a mapping or list"),
     ("stages.0.bogus: {choice: [1]}", "stages.0.bogus: choice value 1 is not valid in the curriculum"),
     ("stages.0.hyperparams.n_epochs: {choice: [3, .nan]}", "stages.0.hyperparams.n_epochs.choice: got nan; allowed: finite"),

@@ -248,6 +248,10 @@ def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
                               f"not a {stage.algorithm.upper()} argument{did_you_mean(key, allowed)}; "
                               f"allowed: {', '.join(allowed)}")
     resolve_hyperparams(stage.hyperparams, source=source, field=f"{field}.hyperparams", algorithm=stage.algorithm)
+    if stage.algorithm == "ppo" and stage.hyperparams.get("n_steps", 2048) * stage.n_envs < 2:
+        # PPO's advantage normalisation needs two samples a rollout (SB3 asserts it when it starts).
+        raise ConfigError(source, f"{field}.hyperparams.n_steps", f"1 step in {stage.n_envs} env makes a rollout of one "
+                          "step; allowed: n_steps x n_envs of at least 2")
     if "policy_kwargs" in stage.hyperparams:
         kwargs = policy_kwargs_from_yaml(stage.hyperparams["policy_kwargs"], source, f"{field}.hyperparams.policy_kwargs")
         if refusal := kwargs.refused_by(stage.algorithm):

@@ -127,7 +127,8 @@ def _check_path(curriculum: dict, dotted: str, source: str | Path) -> None:
         if not part:
             raise ConfigError(source, dotted, "not a path into the curriculum (e.g. stages.0.hyperparams.learning_rate)")
         if isinstance(node, list):
-            if not (part.isascii() and part.isdigit() and int(part) < len(node)):
+            # Written as an index is (no leading zero): stages.00 and stages.0 were two parameters setting one value.
+            if not (part.isascii() and part.isdigit() and str(int(part)) == part and int(part) < len(node)):
                 allowed = f"an index from 0 to {len(node) - 1}" if node else "none (the list is empty)"
                 raise ConfigError(source, dotted, f"{where} is a list of {len(node)}; allowed: {allowed}")
             node = node[int(part)]
