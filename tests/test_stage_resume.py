@@ -32,8 +32,9 @@ def _config() -> CurriculumConfig:
     return curriculum_from_mapping(data, TINY)
 
 
-def test_a_resumed_second_stage_writes_its_own_stage_index_and_seed(tmp_path):
-    config, out = _config(), tmp_path / "run"
+def _killed_at_the_second_stages_checkpoint(out: Path) -> CurriculumConfig:
+    """:func:`_config` run into ``out`` until the second stage's first checkpoint, where it dies."""
+    config = _config()
 
     def interrupt(row: dict) -> None:
         if row["stage"] == "sparse":
@@ -41,6 +42,22 @@ def test_a_resumed_second_stage_writes_its_own_stage_index_and_seed(tmp_path):
 
     with pytest.raises(_Interrupted):
         Runner(config, out, progress=False, on_evaluation=interrupt).run()
+    return config
+
+
+def _finished_one_stage_run(out: Path) -> CurriculumConfig:
+    """The tiny curriculum's first stage alone (one evaluation), run to its end into ``out``."""
+    data = yaml.safe_load(TINY.read_text())
+    data["stages"] = [{**data["stages"][0], "budget": 512, "max_steps": 40,
+                       "eval": {"suite": "open", "episodes": 2, "every": 512}}]
+    config = curriculum_from_mapping(data, TINY)
+    Runner(config, out, progress=False).run()
+    return config
+
+
+def test_a_resumed_second_stage_writes_its_own_stage_index_and_seed(tmp_path):
+    out = tmp_path / "run"
+    config = _killed_at_the_second_stages_checkpoint(out)
     stage = out / "stages" / "1-sparse"
     assert read_manifest(stage / "checkpoints" / "last.zip")["timesteps"] == 512
     assert not (stage / "policy.zip").exists()
@@ -167,11 +184,8 @@ def test_a_damaged_best_zip_is_refused_before_it_replaces_the_policy(tmp_path):
 
     from common.errors import ConfigError
 
-    data = yaml.safe_load(TINY.read_text())
-    data["stages"] = [{**data["stages"][0], "budget": 512, "max_steps": 40,
-                       "eval": {"suite": "open", "episodes": 2, "every": 512}}]
-    config, out = curriculum_from_mapping(data, TINY), tmp_path / "run"
-    Runner(config, out, progress=False).run()
+    out = tmp_path / "run"
+    config = _finished_one_stage_run(out)
     stage = out / "stages" / "0-open"
     good = (stage / "policy.zip").read_bytes()
     (stage / "best.zip").write_bytes(b"garbage")
@@ -191,11 +205,8 @@ def test_resuming_a_finished_run_with_a_damaged_eval_csv_is_refused_in_one_line(
     ended the resume in a traceback."""
     from common.errors import ConfigError
 
-    data = yaml.safe_load(TINY.read_text())
-    data["stages"] = [{**data["stages"][0], "budget": 512, "max_steps": 40,
-                       "eval": {"suite": "open", "episodes": 2, "every": 512}}]
-    config, out = curriculum_from_mapping(data, TINY), tmp_path / "run"
-    Runner(config, out, progress=False).run()
+    out = tmp_path / "run"
+    config = _finished_one_stage_run(out)
     log = out / "eval.csv"
     log.write_bytes(damage(log.read_text()).encode("latin-1"))
     before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file() and p.name != ".lock"}
@@ -226,14 +237,8 @@ def _rewritten_manifest(path: Path, change: dict) -> None:
 def test_a_damaged_checkpoint_manifest_is_refused_in_one_line_on_resume(tmp_path, damage, message):
     from common.errors import ConfigError
 
-    config, out = _config(), tmp_path / "run"
-
-    def interrupt(row: dict) -> None:
-        if row["stage"] == "sparse":
-            raise _Interrupted
-
-    with pytest.raises(_Interrupted):
-        Runner(config, out, progress=False, on_evaluation=interrupt).run()
+    out = tmp_path / "run"
+    config = _killed_at_the_second_stages_checkpoint(out)
     _rewritten_manifest(out / "stages" / "1-sparse" / "checkpoints" / "last.zip", damage)
     with pytest.raises(ConfigError, match=message):
         Runner(config, out, resume=True, progress=False).run()
