@@ -45,6 +45,11 @@ def interval_text(agg: dict[str, Any], separator: str = "–", label: str = "95%
     return "no interval from one value" if ci is None else f"{label}{ci[0]:.3f}{separator}{ci[1]:.3f}"
 
 
+def p_value_text(p: float) -> str:
+    """A p-value as the tables print it: two decimals, or "< 0.01" (not a rounded 0.00)."""
+    return f"{p:.2f}" if p >= 0.01 else "< 0.01"
+
+
 def mcnemar(first: Sequence[bool], second: Sequence[bool]) -> tuple[int, int, float]:
     """Paired outcomes (arrived or not) of two agents on the same episodes: how many only the first
     arrived in, how many only the second, and McNemar's exact two-sided p-value (a binomial test of

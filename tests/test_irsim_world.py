@@ -128,6 +128,7 @@ def test_the_agreement_table_pairs_the_episodes_of_both_worlds(capsys):
 
     # Two arrived only in flatland, six only in IR-SIM: the exact two-sided test of 2 in 8.
     assert _paired(summary("ssssss" + "cccccc" + "ss"), summary("sssscc" + "ssssss" + "ss")) == "2 / 6 (0.29)"
+    assert _paired(summary("s" * 10), summary("c" * 10)) == "10 / 0 (< 0.01)"  # p = 2 / 1024, not a rounded 0.00
     policy = str(ROOT / "curricula" / "policies" / "stage1_2d_ppo.zip")
     assert main(["--episodes", "2", "--suites", "sparse", "--policy", policy, "--jobs", "2"]) == 0
     row = capsys.readouterr().out.strip().splitlines()[-1]

@@ -11,7 +11,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from common.evaluation import OUTCOMES, Summary, episodes_as_dicts
-from common.statistics import mcnemar
+from common.statistics import mcnemar, p_value_text
 
 _COLOURS = {"success": "tab:green", "collision": "tab:red", "timeout": "tab:orange", "stuck": "tab:gray"}
 
@@ -58,8 +58,7 @@ def paired_table(summaries: Sequence[Summary]) -> str:
     for s in summaries:
         if s is not best:
             only_it, only_best, p = mcnemar(s.arrivals(), best.arrivals())
-            shown = f"{p:.2f}" if p >= 0.01 else "< 0.01"  # not a rounded 0.00
-            lines.append(f"| {s.agent} | {only_it} | {only_best} | {shown} |")
+            lines.append(f"| {s.agent} | {only_it} | {only_best} | {p_value_text(p)} |")
     return "\n".join(lines) + "\n"
 
 

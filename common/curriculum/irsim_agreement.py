@@ -29,7 +29,7 @@ from common.curriculum.policy import load_policy
 from common.evaluation import Summary, episode_limit, evaluate
 from common.generators import Suite, get_suite
 from common.irsim_export import fixed_routes
-from common.statistics import mcnemar
+from common.statistics import mcnemar, p_value_text
 from common.task import judged_radius
 
 SHIPPED = Path(__file__).resolve().parents[2] / "curricula" / "policies"
@@ -106,7 +106,7 @@ def _paired(flat: Summary, irsim: Summary) -> str:
     """Episodes that arrived in one world only, each way, and the exact McNemar test's p-value:
     whether one world lets the policy arrive more often than chance flips would."""
     only_flat, only_irsim, p = mcnemar(flat.arrivals(), irsim.arrivals())
-    return f"{only_flat} / {only_irsim} ({p:.2f})"
+    return f"{only_flat} / {only_irsim} ({p_value_text(p)})"
 
 
 def _rate(summary: Summary) -> str:
