@@ -75,6 +75,12 @@ def test_commands_respect_the_forward_only_limits(name):
     episode = rollout(make_controller(name), single_circle(5.15).model_copy(update={"robot": robot}))
     v, w = np.array(episode.commands).T
     assert v.min() >= 0.0 and v.max() <= 0.4 and np.abs(w).max() <= 0.6
+    # A robot that cannot stand (v_min 0.2) nor turn right faster than 0.3 rad/s: the world drove
+    # its limits, not the command, and dwa weighed arcs the robot could not take.
+    robot = RobotProfile(v_max=0.6, v_min=0.2, w_max=1.0, w_min=-0.3, accel_v=2.0, accel_w=5.0)
+    episode = rollout(make_controller(name), single_circle(5.15).model_copy(update={"robot": robot}), max_steps=60)
+    v, w = np.array(episode.commands).T
+    assert v.min() >= 0.2 and v.max() <= 0.6 and w.min() >= -0.3 and w.max() <= 1.0
 
 
 def test_go_to_goal_drives_into_an_obstacle_dead_ahead():
@@ -205,3 +211,15 @@ def test_every_controller_drives_into_the_scenarios_goal_radius(name, threshold)
     scenario = Scenario(start=(1.0, 2.0, 0.0), goal=(8.0, 7.0), goal_threshold=threshold)
     episode = run_episode(make_controller(name), scenario, max_steps=400)
     assert episode.outcome == "success", (name, episode)
+
+
+def test_dwa_weighs_only_arcs_the_robot_can_drive():
+    """Its window ran over [0, v_max] x [-w_max, w_max]: with v_min above 0 it chose a turn on the
+    spot, which the robot drove as a step forward (into the wall it faced)."""
+    robot = RobotProfile(v_max=0.6, v_min=0.2, w_max=1.0, w_min=-0.3, accel_v=2.0, accel_w=5.0)
+    scenario = single_circle().model_copy(update={"robot": robot})
+    dwa = make_controller("dwa")
+    dwa.bind(robot, scenario.lidar)
+    dwa.reset()
+    v, w = dwa.window(World(scenario, seed=0).reset())
+    assert v.min() == pytest.approx(0.2) and v.max() <= 0.6 and w.min() == pytest.approx(-0.3) and w.max() <= 1.0

@@ -75,5 +75,8 @@ class Controller(ABC):
         """The (v m/s, w rad/s) command for these readings."""
 
     def clip(self, v: float, w: float) -> tuple[float, float]:
-        """Clip to the forward-only limits policies have too: v in [0, v_max], w in [-w_max, w_max]."""
-        return min(max(v, 0.0), self.robot.v_max), min(max(w, -self.robot.w_max), self.robot.w_max)
+        """Clip to the robot's limits, forward only as policies drive: v in [max(0, v_min), v_max], w
+        in [w_min (default -w_max), w_max]. (Clipped to [0, v_max] x [-w_max, w_max] alone, a robot
+        with a v_min above 0 was told to turn on the spot and drove forward into the wall it faced.)"""
+        robot = self.robot
+        return min(max(v, max(0.0, robot.v_min)), robot.v_max), min(max(w, robot.w_low), robot.w_max)

@@ -153,8 +153,9 @@ class DynamicWindow(LocalController):
         reach_v = (robot.accel_v if math.isfinite(robot.accel_v) else self.accel_v) * dt
         reach_w = (robot.accel_w if math.isfinite(robot.accel_w) else self.accel_w) * dt
         v0, w0 = readings.odometry.v, readings.odometry.w
-        v_low, v_high = max(0.0, min(v0 - reach_v, robot.v_max)), min(robot.v_max, max(v0 + reach_v, 0.0))
-        w_low, w_high = max(-robot.w_max, min(w0 - reach_w, robot.w_max)), min(robot.w_max, max(w0 + reach_w, -robot.w_max))
+        slowest, turn_low = max(0.0, robot.v_min), robot.w_low  # forward only, within the robot's own limits
+        v_low, v_high = max(slowest, min(v0 - reach_v, robot.v_max)), min(robot.v_max, max(v0 + reach_v, slowest))
+        w_low, w_high = max(turn_low, min(w0 - reach_w, robot.w_max)), min(robot.w_max, max(w0 + reach_w, turn_low))
         ws = np.linspace(w_low, w_high, self.w_samples)
         if w_low < 0.0 < w_high:  # driving straight is always among the choices
             ws = np.union1d(ws, [0.0])
