@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from common.irsim_values import Entry, Value, boolean, build_model, fail, join, mapping_of, number_list, real, \
-    string, value_of
+    refuse_misread_values, string, value_of
 from common.motion.spec import Dash, Motion, Orca, Rvo, Sfm
 
 BEHAVIORS = ("dash", "rvo", "sfm")  # an object's own
@@ -101,10 +101,13 @@ def _behavior(name: str, config: dict, path: str) -> Any:
     """The behaviour's model from IR-SIM's keys (keys IR-SIM ignores are ignored)."""
     if name == "orca":
         values = {ours: config[theirs] for theirs, ours in _ORCA_KEYS.items() if config.get(theirs) is not None}
-        return build_model(Orca, path, {k: Value(v, join(path, _theirs(k))) for k, v in values.items()})
-    model = {"dash": Dash, "rvo": Rvo, "sfm": Sfm}[name]
-    keys = [key for key in model.model_fields if key != "name" and key in config and key not in _ROUTE_KEYS]
-    return build_model(model, path, {key: Value(config[key], join(path, key)) for key in keys})
+        model, fields = Orca, {k: Value(v, join(path, _theirs(k))) for k, v in values.items()}
+    else:
+        model = {"dash": Dash, "rvo": Rvo, "sfm": Sfm}[name]
+        keys = [key for key in model.model_fields if key != "name" and key in config and key not in _ROUTE_KEYS]
+        fields = {key: Value(config[key], join(path, key)) for key in keys}
+    refuse_misread_values(model, fields)  # handed over as written: true or "0.7" for a number is refused
+    return build_model(model, path, fields)
 
 
 def _theirs(ours: str) -> str:

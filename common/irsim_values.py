@@ -134,15 +134,21 @@ def fit3(values: list[float]) -> tuple[float, float, float]:
     return x, y, theta
 
 
-def build_model(model: type[BaseModel], path: str, fields: dict[str, Value]) -> Any:
-    """Validate a model; a pydantic error, or a value pydantic would misread (true or "0.7" for
-    a number: :func:`~common.scenario.refuse_misread`), names the IR-SIM field it came from."""
+def refuse_misread_values(model: type[BaseModel], fields: dict[str, Value]) -> None:
+    """A value of ``fields`` written for ``model`` that pydantic would misread (true or "0.7" for
+    a number: :func:`~common.scenario.refuse_misread`), named by the IR-SIM field it came from. For
+    the values the reader hands over as written (a behaviour's parameters); the others it has
+    read by type already."""
     for name, item in fields.items():
         try:
             refuse_misread({name: item.value}, model)
         except ConfigError as error:
             rest = (error.field or "").partition(".")[2]
             raise fail(_within(item.path, rest), error.problem) from None
+
+
+def build_model(model: type[BaseModel], path: str, fields: dict[str, Value]) -> Any:
+    """Validate a model; a pydantic error names the IR-SIM field it came from."""
     try:
         return model(**{name: item.value for name, item in fields.items()})
     except ValidationError as exc:
