@@ -102,6 +102,14 @@ def is_real(value: Any) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
 
 
+def numeral(text: str) -> float | None:
+    """The number a string such as "0.5" reads as (None if it reads as none)."""
+    try:
+        return float(text)
+    except ValueError:
+        return None
+
+
 def is_finite(number: int | float) -> bool:
     """Whether ``number`` is finite as a float (an integer past a float's range, as a file may hold, is not)."""
     try:

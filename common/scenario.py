@@ -45,6 +45,7 @@ from common.fields import (  # noqa: F401  (re-exported: the scenario's caps and
 from common.grid_maps import GridMap, occupied_boxes
 from common.kinematics import Pose2D
 from common.motion.spec import Motion
+from common.params import numeral
 from common.polygons import is_simple_polygon
 from common.yaml_io import read_yaml_mapping
 
@@ -715,14 +716,6 @@ def _key_kinds(model: type[BaseModel]) -> dict[str, frozenset[str]]:
     return {name: frozenset(kind) for name, kind in kinds.items()}
 
 
-def _is_numeral(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
-
-
 def refuse_misread(data: Any, model: type[BaseModel], source: str | Path | None = None, field: str = "") -> None:
     """A one-line error for a value of ``data`` (a person's mapping for ``model``) that pydantic
     would read as something else: true or false where a number belongs (``width: true`` made a
@@ -730,27 +723,28 @@ def refuse_misread(data: Any, model: type[BaseModel], source: str | Path | None 
     (``walls: 0`` read as false). One pass over what a person wrote, not a validator on every
     number: generated scenarios, made at every reset, hold none of these. A grid map generator's
     own parameters are checked by its own rules."""
-    kinds = _key_kinds(model)
+    kinds, anything = _key_kinds(model), frozenset({"other"})
 
-    def walk(value: Any, path: tuple) -> None:
-        key = next((part for part in reversed(path) if isinstance(part, str)), None)
-        allowed = kinds.get(key, frozenset({"other"})) if key is not None else frozenset({"other"})
-        name = ".".join(str(part) for part in (field, *path) if part != "")
+    def walk(value: Any, path: tuple, allowed: frozenset[str]) -> None:
+        # ``allowed``: what the nearest key above ``value`` takes (a list's items take their key's).
+        problem = None
         if isinstance(value, bool) and "flag" not in allowed and path:
-            raise ConfigError(source, name, f"got {str(value).lower()}; allowed: a number")
-        if isinstance(value, str) and "number" in allowed and "text" not in allowed and _is_numeral(value):
-            raise ConfigError(source, name, f"got {quote(value)} (quoted); allowed: a number")
-        if allowed == {"flag"} and not isinstance(value, bool):
-            raise ConfigError(source, name, f"got {quote(value)}; allowed: true or false")
+            problem = f"got {str(value).lower()}; allowed: a number"
+        elif isinstance(value, str) and "number" in allowed and "text" not in allowed and numeral(value) is not None:
+            problem = f"got {quote(value)} (quoted); allowed: a number"
+        elif allowed == {"flag"} and not isinstance(value, bool):
+            problem = f"got {quote(value)}; allowed: true or false"
+        if problem is not None:
+            raise ConfigError(source, ".".join(str(part) for part in (field, *path) if part != ""), problem)
         if isinstance(value, dict):
-            for item_key, item in value.items():
-                if item_key != "generator":
-                    walk(item, (*path, item_key))
+            for key, item in value.items():
+                if key != "generator":
+                    walk(item, (*path, key), kinds.get(key, anything))
         elif isinstance(value, (list, tuple)):
             for index, item in enumerate(value):
-                walk(item, (*path, index))
+                walk(item, (*path, index), allowed)
 
-    walk(data, ())
+    walk(data, (), anything)
 
 
 def scenario_from_mapping(data: dict, source: str | Path | None = None) -> Scenario:

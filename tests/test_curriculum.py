@@ -96,6 +96,11 @@ def _with(change: dict, stage: dict | None = None) -> dict:
     (_with({}, {"algorithm": "td3", "hyperparams": {"action_noise": {"type": "normal", "sigma": float("nan")}}}),
      "stages.0.hyperparams.action_noise.sigma", "expected a finite number >= 0, got nan"),
     (_with({}, {"hyperparams": {"ent_coef": "auto"}}), "stages.0.hyperparams.ent_coef", "got 'auto'; allowed: a number >= 0"),
+    # An integer past a float's range overflowed math.isfinite: a traceback, not a refusal.
+    (_with({}, {"algorithm": "sac", "hyperparams": {"ent_coef": 10**400}}), "stages.0.hyperparams.ent_coef",
+     "allowed: a number >= 0, 'auto'"),
+    (_with({}, {"algorithm": "sac", "hyperparams": {"action_noise": {"type": "normal", "sigma": 10**400}}}),
+     "stages.0.hyperparams.action_noise.sigma", "expected a finite number >= 0"),
     (_with({}, {"algorithm": "sac", "hyperparams": {"ent_coef": "auto_-1"}}), "stages.0.hyperparams.ent_coef",
      "allowed: a number >= 0, 'auto' or 'auto_<initial value > 0>'"),
     (_with({}, {"algorithm": "sac", "hyperparams": {"target_entropy": "bogus"}}), "stages.0.hyperparams.target_entropy",

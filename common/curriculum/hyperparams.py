@@ -18,6 +18,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from common.errors import ConfigError, quote
+from common.params import is_finite, is_real, numeral
 
 _NOISE_TYPES = ("normal", "ornstein_uhlenbeck")
 
@@ -59,24 +60,18 @@ _FLAGS = ("use_sde", "normalize_advantage", "use_sde_at_warmup")
 
 
 def _finite(value: Any, low: float) -> bool:
-    return not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value) and value >= low
+    """A finite real number (an integer past a float's range is not) of at least ``low``."""
+    return is_real(value) and is_finite(value) and value >= low
 
 
 def _ent_coef(value: Any, algorithm: str | None) -> str | None:
     """What ``ent_coef`` allows if ``value`` is not that, else None: SAC's may be learnt from an
     initial value (``"auto"``, ``"auto_0.1"``)."""
-    learnt = algorithm != "ppo" and isinstance(value, str) and (
-        value == "auto" or value.startswith("auto_") and _finite(_number(value[5:]), 0.0) and _number(value[5:]) > 0)
+    initial = numeral(value[5:]) if isinstance(value, str) and value.startswith("auto_") else None
+    learnt = algorithm != "ppo" and (value == "auto" or (initial is not None and _finite(initial, 0.0) and initial > 0))
     if _finite(value, 0.0) or learnt:
         return None
     return "a number >= 0" + ("" if algorithm == "ppo" else ", 'auto' or 'auto_<initial value > 0>'")
-
-
-def _number(text: str) -> float | None:
-    try:
-        return float(text)
-    except ValueError:
-        return None
 
 
 def _target_entropy(value: Any, algorithm: str | None) -> str | None:
