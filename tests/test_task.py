@@ -249,4 +249,7 @@ def test_what_a_copy_would_share_refuses_to_be_copied():
         assert np.array_equal(crowd.step(still)[0], twin.step(still)[0])
         assert np.array_equal(crowd.unwrapped.readings.movers.rows, twin.unwrapped.readings.movers.rows)
     assert not np.array_equal(twin.unwrapped.readings.movers.rows[:, :2], first[:, :2])  # they walked
-    assert not crowd.unwrapped.readings.movers.rows.flags.writeable  # a snapshot, as the readings' lidar
+    kept = crowd.unwrapped.readings  # a snapshot: the world's next step leaves it as it was
+    rows = kept.movers.rows.copy()
+    crowd.step(still)
+    assert np.array_equal(kept.movers.rows, rows) and not np.array_equal(crowd.unwrapped.readings.movers.rows, rows)

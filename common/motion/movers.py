@@ -289,9 +289,9 @@ class Movers:
 
     def states(self) -> MoverStates:
         """The movers' poses, velocities and sizes now (the controlled robot's own row left out)."""
-        states = self._states.copy()
-        states.setflags(write=False)  # a snapshot, as the readings' lidar
-        return MoverStates(states, self.labels)
+        # A copy (the next step overwrites ours), left writable: marking it read-only cost 0.26 µs,
+        # 1% of the crowd env's step, every step (movers_vs_static stands at its 0.5 line).
+        return MoverStates(self._states.copy(), self.labels)
 
     def visible(self) -> tuple[np.ndarray, np.ndarray]:
         """What a lidar sees of the movers now: circles (x, y, r) and boxes (x, y, cos, sin, half
