@@ -66,6 +66,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, field_validator, model_validator
 
 from common.errors import ConfigError
+from common.fields import Fraction
 from common.robots import PROFILES, RobotFamily, robot_profile
 from common.scenario import RobotProfile, Scenario
 
@@ -73,7 +74,7 @@ from common.scenario import RobotProfile, Scenario
 Scale = Annotated[float, Field(gt=0.0, le=10.0), Strict()]
 Range = tuple[Scale, Scale]
 Steps = Annotated[int, Field(ge=0, le=20), Strict()]
-Fraction = Annotated[float, Field(ge=0.0, le=1.0), Strict()]
+StrictFraction = Annotated[Fraction, Strict()]
 HeadingSource = Literal["wheels", "gyro"]
 ONLY_3D = ("friction", "mass_scale", "control_period", "heading_source", "gyro_noise", "gyro_bias", "accel_noise")
 ONLY_2D = ("dynamics", "robot_family")
@@ -108,9 +109,9 @@ class Conditions(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
     robot: str | dict[str, Any] | None = None
-    lidar_noise: Fraction | None = None
+    lidar_noise: StrictFraction | None = None
     lidar_beams: Annotated[int, Field(ge=1, le=4096), Strict()] | None = None  # LidarSpec.beams's bounds
-    odometry_noise: Fraction | None = None
+    odometry_noise: StrictFraction | None = None
     action_delay: Steps | tuple[Steps, Steps] | None = None
     motor_scale: Range | None = None
     friction: Range | None = None
@@ -118,8 +119,8 @@ class Conditions(BaseModel):
     control_period: Scale | None = None
     dynamics: Literal["kinematic", "first_order"] | None = None
     heading_source: HeadingSource | None = None
-    gyro_noise: Fraction | None = None
-    gyro_bias: Fraction | None = None
+    gyro_noise: StrictFraction | None = None
+    gyro_bias: StrictFraction | None = None
     accel_noise: Annotated[float, Field(ge=0.0, le=10.0), Strict()] | None = None
     robot_family: RobotFamily | None = None
 

@@ -170,9 +170,9 @@ class OnnxPolicy:
             if not all(d.HasField("dim_value") or d.HasField("dim_param") for d in dims):
                 raise ConfigError(self.path, f"graph tensor {info.name!r}", "of a size shape inference cannot tell; refused")
             sizes[info.name] = shape = [d.dim_value if d.HasField("dim_value") else 1 for d in dims]  # a batch of one
-            if math.prod(shape) > MAX_ELEMENTS:
-                raise ConfigError(self.path, f"graph tensor {info.name!r}", f"{math.prod(shape):,} values for one "
-                                  f"observation; allowed: at most {MAX_ELEMENTS:,}")
+            if (values := math.prod(shape)) > MAX_ELEMENTS:
+                raise ConfigError(self.path, f"graph tensor {info.name!r}", f"{values:,} values for one observation; "
+                                  f"allowed: at most {MAX_ELEMENTS:,}")
         for tensor in inferred.initializer:
             sizes[tensor.name] = list(tensor.dims)
         work = sum(math.prod(sizes.get(node.output[0], [0])) * (sizes.get(node.input[0]) or [1])[-1]

@@ -176,7 +176,6 @@ class Runner:
         self.progress = progress
         self.on_evaluation = on_evaluation  # sees every periodic evaluation's eval.csv row (a sweep reports them)
         self.eval_log: EvalLog | None = None
-        self.commit: str | None = None
         self.provenance: dict = {}  # run.json, once prepare() has read and checked it
         self._lock: FileLock | None = None
 
@@ -229,16 +228,20 @@ class Runner:
             state = {"done": [], "stages": {}}
             write_json(state_path, state)
         self.eval_log = EvalLog(self.out / "eval.csv")
-        # The commit the run started from is the code that trains every stage, even when a
-        # policy is saved (or the run resumed) after later commits.
         provenance = read_json(self.out / "run.json", MAX_STATE_BYTES, "this run's run.json")
         if not isinstance(provenance, dict) or not isinstance(provenance.get("git_commit", 0), (str, type(None))):
             raise ConfigError(self.out / "run.json", "git_commit", "missing; the run directory is damaged")
         for key in ("device", "package_version"):  # the report's first line reads them
             if not isinstance(provenance.get(key), str):
                 raise ConfigError(self.out / "run.json", key, "missing; the run directory is damaged")
-        self.commit, self.provenance = provenance["git_commit"], provenance
+        self.provenance = provenance
         return state
+
+    @property
+    def commit(self) -> str | None:
+        """The commit the run started from (run.json's): the code that trains every stage, even
+        when a policy is saved, or the run resumed, after later commits."""
+        return self.provenance.get("git_commit")
 
     def release(self) -> None:
         """Let another run use the directory."""

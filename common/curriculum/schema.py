@@ -236,7 +236,8 @@ def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
         raise ConfigError(source, f"{field}.{error.field}", error.problem) from None
     from common.curriculum.policy import algorithm_class  # torch and stable-baselines3: seconds, for curricula only
 
-    arguments = set(inspect.signature(algorithm_class(stage.algorithm).__init__).parameters)
+    parameters = inspect.signature(algorithm_class(stage.algorithm).__init__).parameters
+    arguments = set(parameters)
     allowed = sorted(arguments & CONFIGURABLE)
     for key in stage.hyperparams:
         if key in arguments - _MANAGED - CONFIGURABLE - {"self"}:
@@ -248,7 +249,7 @@ def _check_stage(stage: StageSpec, index: int, source: str | Path) -> None:
                               f"not a {stage.algorithm.upper()} argument{did_you_mean(key, allowed)}; "
                               f"allowed: {', '.join(allowed)}")
     resolve_hyperparams(stage.hyperparams, source=source, field=f"{field}.hyperparams", algorithm=stage.algorithm)
-    if stage.algorithm == "ppo" and stage.hyperparams.get("n_steps", 2048) * stage.n_envs < 2:
+    if stage.algorithm == "ppo" and stage.hyperparams.get("n_steps", parameters["n_steps"].default) * stage.n_envs < 2:
         # PPO's advantage normalisation needs two samples a rollout (SB3 asserts it when it starts).
         raise ConfigError(source, f"{field}.hyperparams.n_steps", f"1 step in {stage.n_envs} env makes a rollout of one "
                           "step; allowed: n_steps x n_envs of at least 2")
